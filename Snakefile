@@ -1,0 +1,16 @@
+# luckyao: every figure of the study from one command.
+#   snakemake                                   # the default (quick) study, config/config.yaml
+#   snakemake --config study=config/paper.yaml  # paper fidelity
+# The study config is validated (workflow/schemas/config.schema.yaml) before any job runs.
+
+include: "workflow/rules/common.smk"
+include: "workflow/rules/turbulence.smk"
+include: "workflow/rules/simulate.smk"
+include: "workflow/rules/lucky.smk"
+include: "workflow/rules/figures.smk"
+
+
+rule all:
+    input:
+        expand("figures/{fig}.{ext}", fig=list(STUDY["figures"]), ext=["pdf", "png", "nc"]),
+    default_target: True

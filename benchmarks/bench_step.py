@@ -1,0 +1,76 @@
+"""Benchmark: ms per simulated 2.5 ms step, by stage, for the on-axis no-AO case.
+
+Single thread. Uses the base system of config/config.yaml with screens for a
+short stretch of time (the per-step cost does not depend on the duration).
+The last line is ``ms_per_step <number>`` (propagation + science image + truth).
+
+Run: .venv/bin/python benchmarks/bench_step.py [config.yaml]
+"""
+
+import os
+
+for _name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS"):
+    os.environ[_name] = "1"
+
+import sys  # noqa: E402
+import tempfile  # noqa: E402
+import time  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import numpy as np  # noqa: E402
+
+from luckyao.config import load_study, turbulence_spec  # noqa: E402
+from luckyao.imaging import Imager  # noqa: E402
+from luckyao.propagation import Propagator  # noqa: E402
+from luckyao.pupil import TiltRemover  # noqa: E402
+from luckyao.simulate import System  # noqa: E402
+from luckyao.turbulence import read_screens, write_screens  # noqa: E402
+from luckyao.units import REFERENCE_WAVELENGTH_M  # noqa: E402
+
+N_STEPS = 800
+
+
+def main(config_path="config/config.yaml"):
+    study, _ = load_study(config_path)
+    case = dict(study["base"], duration_s=1.0)
+    spec = dict(turbulence_spec(study, case), duration_s=N_STEPS * case["time_step_s"] + 0.1)
+    with tempfile.TemporaryDirectory() as tmp:
+        start = time.perf_counter()
+        write_screens(spec, Path(tmp) / "s.npy", Path(tmp) / "s.nc", {})
+        print(f"screens for {spec['duration_s']:.1f} s: {time.perf_counter() - start:.1f} s")
+        screens = read_screens(Path(tmp) / "s.npy", Path(tmp) / "s.nc")
+        system = System.from_config(case)
+        imager = Imager(system.telescope, system.camera)
+        x, y = imager.grid.xy_m
+        propagator = Propagator(list(system.layers), screens, list(system.targets), x[imager.mask], y[imager.mask])
+        tilt = TiltRemover.for_mask(imager.grid, imager.mask)
+        to_camera = np.float32(REFERENCE_WAVELENGTH_M / system.camera.wavelength_m)
+        np.asarray(screens.flat).sum()  # page the memory-mapped screens in
+        for step in range(8):  # warm up: JIT, FFT plans
+            imager.intensity(propagator.sample(step, system.layer_scale(step)) * to_camera)
+        stages = dict.fromkeys(["propagation", "science image", "truth rms", "frame"], 0.0)
+        intensity = None
+        for step in range(N_STEPS):
+            t0 = time.perf_counter()
+            phase = propagator.sample(step, system.layer_scale(step))
+            t1 = time.perf_counter()
+            image = imager.intensity(phase * to_camera)
+            intensity = image if intensity is None else intensity + image
+            t2 = time.perf_counter()
+            tilt.rms(phase)
+            t3 = time.perf_counter()
+            if step % system.steps_per_frame == system.steps_per_frame - 1:
+                imager.to_pixels(intensity / system.steps_per_frame)
+                intensity = None
+            t4 = time.perf_counter()
+            for name, dt in zip(stages, (t1 - t0, t2 - t1, t3 - t2, t4 - t3)):
+                stages[name] += dt
+    print(f"pupil {imager.grid.n_pix}^2 samples ({imager.n_valid} in the pupil), FFT {imager.fft_size}^2, "
+          f"{len(system.layers)} layers, {N_STEPS} steps, single thread")
+    for name, total in stages.items():
+        print(f"{name:>14s}: {1e3 * total / N_STEPS:.3f} ms per step")
+    print(f"ms_per_step {1e3 * sum(stages.values()) / N_STEPS:.3f}")
+
+
+if __name__ == "__main__":
+    main(*sys.argv[1:])

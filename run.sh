@@ -1,0 +1,40 @@
+#!/usr/bin/env bash
+# luckyao: the two commands of the README.
+#   bash run.sh study [snakemake args...]   set up .venv, run the default study -> figures/
+#   bash run.sh test  [pytest args...]      set up .venv, run the test suite
+# Needs only Python >= 3.11 with pip; installs everything into .venv.
+set -euo pipefail
+cd "$(dirname "$0")"
+
+PYTHON="${PYTHON:-python3}"
+VENV=.venv
+
+setup() {
+    if [ ! -x "$VENV/bin/python" ]; then
+        "$PYTHON" -m venv "$VENV"
+    fi
+    # reinstall only when the package metadata changed
+    local stamp="$VENV/.luckyao-installed"
+    if [ ! -f "$stamp" ] || [ pyproject.toml -nt "$stamp" ]; then
+        "$VENV/bin/python" -m pip install --quiet --upgrade pip
+        "$VENV/bin/python" -m pip install --quiet -e ".[test]"
+        touch "$stamp"
+    fi
+}
+
+command="${1:-}"
+shift || true
+case "$command" in
+    study)
+        setup
+        exec "$VENV/bin/snakemake" "$@"
+        ;;
+    test)
+        setup
+        exec "$VENV/bin/python" -m pytest "$@"
+        ;;
+    *)
+        echo "usage: bash run.sh study|test [args...]" >&2
+        exit 2
+        ;;
+esac

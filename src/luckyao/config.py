@@ -1,0 +1,158 @@
+"""Study configuration: validation, case resolution, hashing and the turbulence key.
+
+A study config (YAML) has a ``base`` system and named ``cases`` that override
+it. Everything is checked against ``workflow/schemas/config.schema.yaml`` and a
+few cross-key rules before any job runs; the first problem is reported as a
+``ConfigError`` naming the key (``cases.noao_r0_20cm.atmosphere.r0_500nm_m``).
+"""
+
+import copy
+import hashlib
+import json
+from pathlib import Path
+
+import jsonschema
+import yaml
+
+SCHEMA_PATH = Path(__file__).resolve().parents[2] / "workflow" / "schemas" / "config.schema.yaml"
+
+
+class ConfigError(ValueError):
+    """A study configuration that breaks the schema or a cross-key rule."""
+
+
+def load_schema(path: Path = SCHEMA_PATH) -> dict:
+    with open(path) as f:
+        return yaml.safe_load(f)
+
+
+def deep_merge(base: dict, override: dict) -> dict:
+    """A new dict: ``base`` with ``override`` applied recursively (lists are replaced)."""
+    merged = copy.deepcopy(base)
+    for key, value in override.items():
+        if isinstance(value, dict) and isinstance(merged.get(key), dict):
+            merged[key] = deep_merge(merged[key], value)
+        else:
+            merged[key] = copy.deepcopy(value)
+    return merged
+
+
+def _key_path(prefix: str, error: jsonschema.ValidationError) -> str:
+    parts = [prefix] if prefix else []
+    parts += [str(p) for p in error.absolute_path]
+    if error.validator == "required":
+        missing = error.message.split("'")[1]
+        parts.append(missing)
+    elif error.validator == "additionalProperties":
+        extra = error.message.split("'")[1]
+        parts.append(extra)
+    return ".".join(parts) or "(top level)"
+
+
+def _validate(instance, schema: dict, prefix: str) -> None:
+    validator = jsonschema.Draft7Validator(schema)
+    errors = sorted(validator.iter_errors(instance), key=lambda e: list(e.absolute_path))
+    if errors:
+        error = errors[0]
+        raise ConfigError(f"config key '{_key_path(prefix, error)}': {error.message}")
+
+
+def _check_case(name: str, case: dict, turbulence: dict) -> None:
+    where = f"cases.{name}"
+    atm = case["atmosphere"]
+    n = len(atm["height_m"])
+    for key in ("cn2_fraction", "wind_speed_m_s", "wind_direction_deg"):
+        if len(atm[key]) != n:
+            raise ConfigError(f"config key '{where}.atmosphere.{key}': has {len(atm[key])} values, "
+                              f"height_m has {n}")
+    if abs(sum(atm["cn2_fraction"]) - 1) > 1e-3:
+        raise ConfigError(f"config key '{where}.atmosphere.cn2_fraction': sums to "
+                          f"{sum(atm['cn2_fraction']):.4f}, must sum to 1")
+    if atm["r0_amplitude_m"] >= atm["r0_500nm_m"]:
+        raise ConfigError(f"config key '{where}.atmosphere.r0_amplitude_m': must be below r0_500nm_m")
+    steps = case["camera"]["frame_time_s"] / case["time_step_s"]
+    if abs(steps - round(steps)) > 1e-6 or round(steps) < 1:
+        raise ConfigError(f"config key '{where}.camera.frame_time_s': must be a whole number of time_step_s")
+    if case["duration_s"] < case["camera"]["frame_time_s"]:
+        raise ConfigError(f"config key '{where}.duration_s': shorter than one camera frame")
+    if case["duration_s"] > turbulence["duration_s"] + 1e-9:
+        raise ConfigError(f"config key '{where}.duration_s': {case['duration_s']} s exceeds "
+                          f"turbulence.duration_s = {turbulence['duration_s']} s")
+    if case["telescope"]["obscuration_m"] >= case["telescope"]["diameter_m"]:
+        raise ConfigError(f"config key '{where}.telescope.obscuration_m': must be below diameter_m")
+    radius = turbulence["field_radius_arcsec"]
+    for x, y in case["targets_arcsec"]:
+        if (x * x + y * y) ** 0.5 > radius:
+            raise ConfigError(f"config key '{where}.targets_arcsec': target ({x}, {y}) lies beyond "
+                              f"turbulence.field_radius_arcsec = {radius}")
+
+
+def validate_study(config: dict, schema: dict | None = None) -> dict:
+    """Check a study config; returns ``{case name: resolved case config}``.
+
+    Raises ``ConfigError`` naming the first offending key.
+    """
+    schema = schema or load_schema()
+    _validate(config, schema, "")
+    case_schema = dict(schema["definitions"]["case"], definitions=schema["definitions"])
+    cases = {}
+    for name, override in config["cases"].items():
+        resolved = deep_merge(config["base"], override)
+        _validate(resolved, case_schema, f"cases.{name}")
+        _check_case(name, resolved, config["turbulence"])
+        cases[name] = resolved
+    for fig_id, figure in config["figures"].items():
+        for case in figure["cases"]:
+            if case not in cases:
+                raise ConfigError(f"config key 'figures.{fig_id}.cases': unknown case '{case}'")
+        if figure["kind"] == "quality_vs_fraction" and "criterion" not in figure:
+            raise ConfigError(f"config key 'figures.{fig_id}.criterion': required for {figure['kind']}")
+        detector = figure.get("detector")
+        if detector is not None and detector not in config["lucky"]["detectors"]:
+            raise ConfigError(f"config key 'figures.{fig_id}.detector': unknown detector '{detector}'")
+    return cases
+
+
+def load_study(path) -> tuple[dict, dict]:
+    """Read and validate a study YAML file; returns (config, resolved cases)."""
+    try:
+        with open(path) as f:
+            config = yaml.safe_load(f)
+    except FileNotFoundError as err:
+        raise ConfigError(f"config file '{path}' not found") from err
+    except yaml.YAMLError as err:
+        raise ConfigError(f"config file '{path}' is not valid YAML: {err}") from err
+    return config, validate_study(config)
+
+
+def canonical_json(value) -> str:
+    """Key-sorted compact JSON: the text that is hashed and stored."""
+    return json.dumps(value, sort_keys=True, separators=(",", ":"))
+
+
+def sha256(value) -> str:
+    return hashlib.sha256(canonical_json(value).encode()).hexdigest()
+
+
+def turbulence_spec(study: dict, case: dict) -> dict:
+    """Everything the shared screens depend on (not r0, Cn2 or wind direction:
+    those only scale or orient the same strips)."""
+    atm = case["atmosphere"]
+    return {
+        "seed": study["seed"],
+        **study["turbulence"],
+        "time_step_s": case["time_step_s"],
+        "diameter_m": case["telescope"]["diameter_m"],
+        "outer_scale_m": atm["outer_scale_m"],
+        "height_m": atm["height_m"],
+        "wind_speed_m_s": atm["wind_speed_m_s"],
+    }
+
+
+def turbulence_key(spec: dict) -> str:
+    return "screens_" + sha256(spec)[:12]
+
+
+def lucky_settings(study: dict, case_name: str) -> dict:
+    """The post-processing settings one case's lucky job uses."""
+    return {"seed": study["seed"], "case": case_name, **study["lucky"]}

@@ -1,0 +1,98 @@
+"""Lucky-camera detector model: photon shot noise and Gaussian read noise.
+
+As in the study (Basden 2014): the signal is given as detected photons per frame, so
+there is no quantum efficiency, no EMCCD excess noise factor, no bias and no gain; a
+pixel reads ``Poisson(N I) + Normal(0, sigma_read)`` electrons, ``I`` the unit-flux
+image and ``N`` the photons per frame.
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class Detector:
+    """A detector model; ``photons_per_frame=None`` is the noiseless camera.
+
+    ``photons_per_frame`` [photon per frame]: detected photons from the target in one
+    frame (the mean flux of the noisy frame). ``read_noise_e`` [electron rms per pixel
+    per frame]: standard deviation of the Gaussian read noise.
+    """
+
+    name: str
+    photons_per_frame: float | None = None
+    read_noise_e: float = 0.0
+
+    def __post_init__(self):
+        if self.photons_per_frame is None:
+            if self.read_noise_e != 0.0:
+                raise ValueError("a noiseless detector (photons_per_frame=None) has no read noise")
+        elif not self.photons_per_frame > 0:
+            raise ValueError(f"photons_per_frame must be > 0, got {self.photons_per_frame}")
+        if not self.read_noise_e >= 0:
+            raise ValueError(f"read_noise_e must be >= 0, got {self.read_noise_e}")
+
+    @property
+    def noiseless(self) -> bool:
+        return self.photons_per_frame is None
+
+
+def apply_detector(frames_unit_flux: np.ndarray, detector: Detector,
+                   rng: np.random.Generator) -> np.ndarray:
+    """Detected frames [electron] (float32, same shape) from unit-flux frames (..., n, n).
+
+    Each pixel: ``Poisson(N * I) + sigma * Normal(0, 1)``, ``N`` =
+    ``detector.photons_per_frame``, ``sigma`` = ``detector.read_noise_e``; so the mean
+    is ``N I`` and the variance ``N I + sigma^2``. Negative unit-flux values (rounding)
+    are clipped to 0. A noiseless detector returns a float32 copy of the unit-flux
+    frames (not scaled) and draws nothing from ``rng``. The input is never modified.
+
+    Independent Poisson pixels are drawn in one of two equivalent ways (a Poisson
+    process: the total ``K ~ Poisson(N sum I)`` and, given ``K``, photons
+    independently in pixel ``p`` with probability ``I_p / sum I``, e.g. Feller vol. 1,
+    sec. VI.6): per photon (inverse-CDF sampling, then counting) when a frame holds fewer
+    than ``n_pixels / 16`` photons (faster there: ~0.2 us per photon against ~0.05 us
+    per pixel); per pixel otherwise.
+    """
+    frames = np.asarray(frames_unit_flux)
+    if detector.noiseless:
+        return np.array(frames, dtype=np.float32, copy=True)
+    if frames.min() < 0:
+        frames = np.maximum(frames, 0)
+    if detector.photons_per_frame < frames.shape[-1] * frames.shape[-2] / 16:
+        electrons = _poisson_by_photons(frames, detector.photons_per_frame, rng)
+    else:
+        electrons = rng.poisson(frames.astype(np.float64) * detector.photons_per_frame)
+        electrons = electrons.astype(np.float32)
+    if detector.read_noise_e > 0:
+        electrons += np.float32(detector.read_noise_e) * rng.standard_normal(
+            electrons.shape, dtype=np.float32)
+    return electrons
+
+
+def _poisson_by_photons(frames: np.ndarray, photons: float,
+                        rng: np.random.Generator) -> np.ndarray:
+    """Independent Poisson counts (float32) of means ``photons * frames`` (..., n, n), frames >= 0.
+
+    Per frame ``j``: ``K_j ~ Poisson(photons * sum frames_j)`` photons, each placed at the
+    pixel whose interval of the normalised cumulative sum (float64) holds a uniform
+    deviate; the CDFs of all frames are laid end to end (frame ``j`` on ``[j, j + 1]``)
+    so one sorted search serves the whole batch.
+    """
+    shape = frames.shape
+    flat = frames.reshape(-1, shape[-2] * shape[-1])
+    k, m = flat.shape
+    cdf = np.cumsum(flat, axis=1, dtype=np.float64)
+    totals = cdf[:, -1].copy()
+    n_photons = rng.poisson(photons * totals)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        cdf /= totals[:, None]
+    cdf[:, -1] = 1.0  # exact end of each frame's interval
+    cdf += np.arange(k)[:, None]
+    frame_of_photon = np.repeat(np.arange(k), n_photons)
+    position = frame_of_photon + rng.random(frame_of_photon.size)
+    position = np.minimum(position, np.nextafter(frame_of_photon + 1.0, 0.0))
+    pixel = np.searchsorted(cdf.ravel(), position, side="right")
+    counts = np.bincount(pixel, minlength=k * m)
+    return counts.astype(np.float32).reshape(shape)

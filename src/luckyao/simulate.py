@@ -1,0 +1,146 @@
+"""The time loop of one case: turbulence -> pupil phase -> lucky-camera frames.
+
+Per 2.5 ms step: the propagator samples every layer along each target's line
+of sight; the camera image of the phase (scaled from 500 nm to the camera
+wavelength) is added to the frame; the tilt-removed rms of the phase is the
+per-frame truth. A frame is the mean of its steps' unit-flux images.
+"""
+
+import logging
+import time
+from dataclasses import dataclass
+
+import numpy as np
+import xarray as xr
+
+from .atmosphere import Layer, R0Schedule
+from .imaging import Camera, Imager
+from .propagation import LineOfSight, Propagator, ScreenSet
+from .pupil import Telescope, TiltRemover
+from .units import ARCSEC_RAD, REFERENCE_WAVELENGTH_M, phase_rad_to_nm
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class System:
+    """The physical objects of one case, built from its resolved config."""
+
+    telescope: Telescope
+    camera: Camera
+    layers: tuple[Layer, ...]
+    r0: R0Schedule
+    outer_scale_m: float
+    targets: tuple[LineOfSight, ...]
+    time_step_s: float
+    steps_per_frame: int
+    n_frames: int
+
+    @classmethod
+    def from_config(cls, case: dict) -> "System":
+        atm, cam = case["atmosphere"], case["camera"]
+        layers = tuple(Layer(*v) for v in zip(atm["height_m"], atm["cn2_fraction"],
+                                              atm["wind_speed_m_s"], atm["wind_direction_deg"]))
+        steps_per_frame = round(cam["frame_time_s"] / case["time_step_s"])
+        return cls(
+            telescope=Telescope(case["telescope"]["diameter_m"], case["telescope"]["obscuration_m"]),
+            camera=Camera(cam["wavelength_m"], cam["n_pixels"], cam["field_of_view_arcsec"] / cam["n_pixels"]),
+            layers=layers,
+            r0=R0Schedule(atm["r0_500nm_m"], atm["r0_amplitude_m"], atm["r0_period_s"]),
+            outer_scale_m=atm["outer_scale_m"],
+            targets=tuple(LineOfSight(x * ARCSEC_RAD, y * ARCSEC_RAD) for x, y in case["targets_arcsec"]),
+            time_step_s=case["time_step_s"],
+            steps_per_frame=steps_per_frame,
+            n_frames=int(np.floor(case["duration_s"] / cam["frame_time_s"] + 1e-9)),
+        )
+
+    def layer_scale(self, step: int) -> np.ndarray:
+        """Per-layer factor from the normalised screens to rad at 500 nm at ``step``."""
+        r0 = self.r0.r0_m(step * self.time_step_s)
+        return r0 ** (-5 / 6) * np.sqrt([layer.cn2_fraction for layer in self.layers])
+
+
+class Progress:
+    """Logs done/total, rate and ETA at most every ``every_s`` seconds."""
+
+    def __init__(self, total: int, what: str, every_s: float = 10.0):
+        self.total, self.what, self.every_s = total, what, every_s
+        self.start = self.last = time.perf_counter()
+
+    def update(self, done: int) -> None:
+        now = time.perf_counter()
+        if now - self.last < self.every_s and done < self.total:
+            return
+        self.last = now
+        rate = done / max(now - self.start, 1e-9)
+        eta = (self.total - done) / rate if rate > 0 else float("inf")
+        log.info("%s %d/%d (%.1f%%), %.1f/s, ETA %.0f s", self.what, done, self.total,
+                 100 * done / self.total, rate, eta)
+
+
+def simulate(system: System, screens: ScreenSet, write_frames, block_frames: int = 32) -> xr.Dataset:
+    """Run the case; ``write_frames(start, frames (target, k, n, n))`` receives the
+    noiseless unit-flux frames. Returns the telemetry dataset.
+
+    Per frame it records the truth (tilt-removed rms) and the frame's value on
+    the optical axis over the diffraction-limited peak, whose mean over frames
+    is the long-exposure Strehl (no recentring): a plain mean, so its
+    Monte-Carlo error follows from batch means.
+    """
+    imager = Imager(system.telescope, system.camera)
+    x, y = imager.grid.xy_m
+    mask = imager.mask
+    propagator = Propagator(list(system.layers), screens, list(system.targets), x[mask], y[mask])
+    tilt = TiltRemover.for_mask(imager.grid, mask)
+    n_targets, n_frames, spf = len(system.targets), system.n_frames, system.steps_per_frame
+    if n_frames * spf > propagator.n_steps_max:
+        raise ValueError(f"the screens hold {propagator.n_steps_max} steps, the case needs {n_frames * spf}")
+    to_camera = np.float32(REFERENCE_WAVELENGTH_M / system.camera.wavelength_m)
+    n_pix = system.camera.n_pixels
+
+    true_rms_nm = np.empty((n_targets, n_frames), dtype=np.float32)
+    r0_frame = np.empty(n_frames)
+    axis_strehl = np.empty((n_targets, n_frames), dtype=np.float32)
+    progress = Progress(n_frames, "frames")
+    buffer = np.empty((n_targets, block_frames, n_pix, n_pix), dtype=np.float32)
+    for start in range(0, n_frames, block_frames):
+        count = min(block_frames, n_frames - start)
+        for j in range(count):
+            frame = start + j
+            intensity = None
+            rms2 = np.zeros(n_targets)
+            for s in range(spf):
+                step = frame * spf + s
+                phase_500 = propagator.sample(step, system.layer_scale(step))
+                image = imager.intensity(phase_500 * to_camera)
+                intensity = image if intensity is None else intensity + image
+                rms2 += tilt.rms(phase_500) ** 2
+            buffer[:, j] = imager.to_pixels(intensity / spf)
+            axis_strehl[:, frame] = buffer[:, j, n_pix // 2, n_pix // 2] / imager.diffraction_limited_peak
+            true_rms_nm[:, frame] = phase_rad_to_nm(np.sqrt(rms2 / spf), REFERENCE_WAVELENGTH_M)
+            r0_frame[frame] = np.mean(system.r0.r0_m((frame * spf + np.arange(spf)) * system.time_step_s))
+        write_frames(start, buffer[:, :count])
+        progress.update(start + count)
+
+    frame_time = spf * system.time_step_s
+    return xr.Dataset(
+        {
+            "true_rms_nm": (("target", "frame"), true_rms_nm,
+                            {"units": "nm", "long_name": "tilt-removed rms of the residual wavefront "
+                             "over the pupil and the frame's exposure"}),
+            "r0_500nm_m": (("frame",), r0_frame, {"units": "m", "long_name": "Fried parameter at 500 nm"}),
+            "axis_strehl": (("target", "frame"), axis_strehl,
+                            {"units": "1", "long_name": "frame value on the optical axis over the "
+                             "diffraction-limited peak"}),
+        },
+        coords={
+            "time_s": (("frame",), np.arange(n_frames) * frame_time,
+                       {"units": "s", "long_name": "start time of the frame"}),
+            "target_x_arcsec": (("target",), [t.theta_x_rad / ARCSEC_RAD for t in system.targets],
+                                {"units": "arcsec", "long_name": "target x direction"}),
+            "target_y_arcsec": (("target",), [t.theta_y_rad / ARCSEC_RAD for t in system.targets],
+                                {"units": "arcsec", "long_name": "target y direction"}),
+        },
+        attrs={"diffraction_limited_peak": imager.diffraction_limited_peak,
+               "pupil_samples": imager.grid.n_pix, "pupil_sample_m": imager.grid.dx_m},
+    )

@@ -1,0 +1,195 @@
+"""Lucky selection, shift-and-add and the two-pass driver, against explicit theory."""
+
+import numpy as np
+import pytest
+
+from luckyao.detector import Detector, apply_detector
+from luckyao.imaging import Camera, Imager
+from luckyao.lucky import (ExternalCriterion, fraction_counts, rank_frames,
+                           recentring_shifts_px, run_lucky, selection_bins, shift_and_add,
+                           shift_frames)
+from luckyao.metrics import strehl
+from luckyao.pupil import Telescope
+
+
+def test_fraction_counts():
+    assert fraction_counts(1000, [0.001, 0.01, 0.1, 0.5, 1.0]).tolist() == [1, 10, 100, 500, 1000]
+    # max(1, round(f n)): 0.01 x 10 rounds to 0 -> 1; 2.5 rounds half to even -> 2
+    assert fraction_counts(10, [0.01, 0.25, 0.36, 1.0]).tolist() == [1, 2, 4, 10]
+    for bad in ([0.0], [1.5], [np.nan]):
+        with pytest.raises(ValueError):
+            fraction_counts(10, bad)
+
+
+def test_rank_is_stable_with_ties_and_nan_last():
+    values = np.array([3.0, 1.0, np.nan, 3.0, 2.0, 1.0])
+    assert rank_frames(values, larger_is_better=True).tolist() == [0, 3, 4, 1, 5, 2]
+    assert rank_frames(values, larger_is_better=False).tolist() == [1, 5, 4, 0, 3, 2]
+
+
+def test_selection_bins_keep_exactly_the_top_fractions():
+    rng = np.random.default_rng(3)
+    values = rng.permutation(50).astype(float)  # distinct known values
+    counts = fraction_counts(50, [0.1, 0.02, 0.5, 0.1])
+    bins, last = selection_bins(rank_frames(values, False), counts)
+    for count, b in zip(counts, last):
+        kept = set(np.flatnonzero((bins >= 0) & (bins <= b)))
+        assert kept == set(np.flatnonzero(values < count))  # the `count` smallest values
+
+
+def compact_pattern(n, rng):
+    """Non-negative asymmetric 5x5 pattern near the centre of an n x n frame."""
+    image = np.zeros((n, n), dtype=np.float32)
+    image[n // 2 - 3: n // 2 + 2, n // 2 - 1: n // 2 + 4] = rng.random((5, 5)) + 0.1
+    return image
+
+
+def test_shift_and_add_is_exact_for_integer_shifts():
+    """Frames = one compact image rolled by known integer shifts: the sum is K copies of the
+    image rolled so that its centroid is nearest (n/2, n/2)."""
+    n, rng = 32, np.random.default_rng(4)
+    image = compact_pattern(n, rng)
+    shifts = rng.integers(-10, 11, size=(12, 2))
+    frames = np.stack([np.roll(image, tuple(s), axis=(0, 1)) for s in shifts])
+    cy = (image.sum(axis=1) * np.arange(n)).sum() / image.sum()
+    cx = (image.sum(axis=0) * np.arange(n)).sum() / image.sum()
+    home = (int(np.floor(n / 2 - cy + 0.5)), int(np.floor(n / 2 - cx + 0.5)))
+    expected = 12 * np.roll(image.astype(np.float64), home, axis=(0, 1))
+    np.testing.assert_allclose(shift_and_add(frames), expected, rtol=1e-6)
+
+
+@pytest.mark.parametrize("offset, lands_on_second", [(0.3, False), (0.7, True), (0.45, False),
+                                                     (0.55, True)])
+def test_subpixel_centroid_rounds_to_nearest_pixel(offset, lands_on_second):
+    """Two pixels at x0, x0+1 with weights (1-o, o): centroid x0+o. Nearest to n/2: x0 moves
+    to n/2 if o < 1/2, x0+1 does if o > 1/2. Same in y with a vertical pair."""
+    n = 16
+    frames = np.zeros((2, n, n), dtype=np.float32)
+    frames[0, 5, 9], frames[0, 5, 10] = 1 - offset, offset
+    frames[1, 11, 3], frames[1, 12, 3] = 1 - offset, offset
+    out = shift_frames(frames, recentring_shifts_px(
+        np.array([[5, 9 + offset], [11 + offset, 3]]), n))
+    c = n // 2
+    if lands_on_second:
+        assert out[0, c, c] == np.float32(offset) and out[0, c, c - 1] == np.float32(1 - offset)
+        assert out[1, c, c] == np.float32(offset) and out[1, c - 1, c] == np.float32(1 - offset)
+    else:
+        assert out[0, c, c] == np.float32(1 - offset) and out[0, c, c + 1] == np.float32(offset)
+        assert out[1, c, c] == np.float32(1 - offset) and out[1, c + 1, c] == np.float32(offset)
+
+
+def test_shift_frames_has_roll_semantics():
+    frames = np.random.default_rng(5).random((3, 8, 8)).astype(np.float32)
+    shifts = np.array([[1, -2], [7, 3], [-9, 0]])
+    expected = np.stack([np.roll(f, tuple(s), axis=(0, 1)) for f, s in zip(frames, shifts)])
+    np.testing.assert_array_equal(shift_frames(frames, shifts), expected)
+
+
+def chunker(frames, size):
+    return lambda: ((s, frames[s: s + size]) for s in range(0, len(frames), size))
+
+
+def brute_force_image(frames_e, order, count):
+    """Sum of the best `count` frames, each rolled to put its centroid nearest n/2 (np.roll)."""
+    n = frames_e.shape[-1]
+    total = np.zeros((n, n))
+    for f in order[:count]:
+        frame = frames_e[f].astype(np.float64)
+        c = [(frame.sum(axis=1 - a) * np.arange(n)).sum() / frame.sum() for a in (0, 1)]
+        total += np.roll(frame, (int(np.floor(n / 2 - c[0] + 0.5)),
+                                 int(np.floor(n / 2 - c[1] + 0.5))), axis=(0, 1))
+    return total / total.sum()
+
+
+def test_run_lucky_matches_brute_force_for_every_criterion_and_fraction():
+    """Cumulative bins over irregular chunks equal brute-force sums for each fraction, with
+    the same noise (rng default_rng([seed, detector index, chunk start]))."""
+    n, n_frames, chunk, seed = 32, 40, 7, 11
+    rng = np.random.default_rng(6)
+    sigma = rng.uniform(1.0, 3.0, n_frames)
+    pos = rng.uniform(8, 24, size=(n_frames, 2))
+    idx = np.arange(n)
+    dy = idx[None, :, None] - pos[:, 0, None, None]
+    dx = idx[None, None, :] - pos[:, 1, None, None]
+    frames = np.exp(-(dy**2 + dx**2) / (2 * sigma[:, None, None] ** 2))
+    frames = (frames / frames.sum(axis=(1, 2), keepdims=True)).astype(np.float32)
+    before = frames.copy()
+    external = ExternalCriterion("lgs_rms", rng.permutation(n_frames) * 1.0, False, "nm")
+    detectors = [Detector("ideal"), Detector("emccd", 300.0, 0.1)]
+    fractions = [0.05, 0.1, 0.25, 0.5, 1.0]
+    peak = 1 / (2 * np.pi)
+    ds = run_lucky(chunker(frames, chunk), n_frames, detectors, fractions, peak, 0.02, seed,
+                   criteria_external=[external], image_crop_px=None, progress_interval_s=0)
+    np.testing.assert_array_equal(frames, before)
+    assert list(ds.criterion.values) == ["strehl", "d50", "lgs_rms"]
+    for i, det in enumerate(detectors):
+        noisy = np.concatenate([apply_detector(frames[s: s + chunk], det,
+                                               np.random.default_rng([seed, i, s]))
+                                for s in range(0, n_frames, chunk)])
+        np.testing.assert_allclose(ds.frame_strehl[i], strehl(noisy, peak), rtol=1e-12)
+        for name, values, larger in [("strehl", ds.frame_strehl[i].values, True),
+                                     ("d50", ds.frame_d50_arcsec[i].values, False),
+                                     ("lgs_rms", external.values, False)]:
+            sign = -1 if larger else 1
+            order = sorted(range(n_frames), key=lambda f: (sign * values[f], f))
+            for fraction, count in zip(fractions, fraction_counts(n_frames, fractions)):
+                expected = brute_force_image(noisy, order, count)
+                got = ds.image.sel(criterion=name, fraction=fraction, detector=det.name).values
+                np.testing.assert_allclose(got, expected, rtol=1e-5, atol=1e-7)
+                assert ds.strehl.sel(criterion=name, fraction=fraction, detector=det.name) == \
+                    pytest.approx(float(expected.max() / peak), rel=1e-5)
+        everything = brute_force_image(noisy, list(range(n_frames)), n_frames)
+        np.testing.assert_allclose(ds.long_exposure_image.sel(recentring="cog")[i], everything,
+                                   rtol=1e-5, atol=1e-7)
+        plain = noisy.sum(axis=0, dtype=np.float64)
+        np.testing.assert_allclose(ds.long_exposure_image.sel(recentring="none")[i],
+                                   plain / plain.sum(), rtol=1e-5, atol=1e-7)
+
+
+def test_noiseless_selection_picks_the_sharpest_frames():
+    """Centred Gaussians of known widths: Strehl (peak 1/(2 pi sigma^2)) and d50
+    (2 sigma sqrt(2 ln 2)) both rank the narrowest first; the 25% selection keeps exactly
+    the 25% smallest sigma."""
+    n, n_frames = 32, 20
+    sigma = np.random.default_rng(8).permutation(np.linspace(1.0, 2.9, n_frames))
+    idx = np.arange(n) - n // 2
+    r2 = idx[:, None] ** 2 + idx[None, :] ** 2
+    frames = np.exp(-r2[None] / (2 * sigma[:, None, None] ** 2))
+    frames = (frames / frames.sum(axis=(1, 2), keepdims=True)).astype(np.float32)
+    ds = run_lucky(chunker(frames, 6), n_frames, [Detector("ideal")], [0.25, 1.0],
+                   1 / (2 * np.pi), 1.0, 0, image_crop_px=None)
+    np.testing.assert_allclose(ds.frame_strehl[0], 1 / sigma**2, rtol=1e-3)
+    np.testing.assert_allclose(ds.frame_d50_arcsec[0], 2 * sigma * np.sqrt(2 * np.log(2)),
+                               rtol=2e-3)
+    best = np.sort(np.argsort(sigma)[:5])
+    expected = frames[best].sum(axis=0, dtype=np.float64)
+    for name in ("strehl", "d50"):
+        got = ds.image.sel(criterion=name, fraction=0.25, detector="ideal").values
+        np.testing.assert_allclose(got, expected / expected.sum(), rtol=1e-5, atol=1e-8)
+
+
+def test_long_exposure_strehl_of_wandering_diffraction_limited_images():
+    """Half the frames displaced by +(6, 9) px, half by -(7, 4): recentred, the long exposure
+    is diffraction limited (Strehl 1); not recentred, its peak is half the
+    diffraction-limited one (Strehl 1/2, plus the other image's wing there, < 1e-2)."""
+    imager = Imager(Telescope(4.2, 1.2), Camera(800e-9, 64, 5 / 256))
+    dl = imager.diffraction_limited
+    frames = np.stack([np.roll(dl, (6, 9), axis=(0, 1))] * 5
+                      + [np.roll(dl, (-7, -4), axis=(0, 1))] * 5)
+    ds = run_lucky(chunker(frames, 4), 10, [Detector("ideal")], [0.5, 1.0],
+                   imager.diffraction_limited_peak, imager.camera.pixel_scale_arcsec, 0)
+    s = ds.long_exposure_strehl.sel(detector="ideal")
+    assert float(s.sel(recentring="cog")) == pytest.approx(1.0, abs=1e-6)
+    assert float(s.sel(recentring="none")) == pytest.approx(0.5, abs=1e-2)
+    np.testing.assert_allclose(ds.strehl, 1.0, atol=1e-6)
+
+
+def test_dataset_is_cf_labelled():
+    frames = np.zeros((4, 16, 16), dtype=np.float32)
+    frames[:, 8, 8] = 1.0
+    ds = run_lucky(chunker(frames, 4), 4, [Detector("ideal"), Detector("scmos", 100.0, 1.0)],
+                   [0.5, 1.0], 1.0, 0.02, 0)
+    assert ds.strehl.dims == ("criterion", "fraction", "detector")
+    assert ds.long_exposure_strehl.dims == ("recentring", "detector")
+    for name in list(ds.data_vars) + list(ds.coords):
+        assert {"units", "long_name"} <= set(ds[name].attrs), name

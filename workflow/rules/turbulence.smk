@@ -1,0 +1,16 @@
+rule turbulence:
+    """Normalised phase screens shared by every case with the same turbulence spec."""
+    input:
+        code=src("atmosphere", "turbulence", "datasets"),
+    output:
+        screens="results/turbulence/{key}.npy",
+        metadata="results/turbulence/{key}.nc",
+    params:
+        spec=lambda w: canonical_json(TURBULENCE_BY_KEY[w.key]),
+    log:
+        "logs/turbulence/{key}.log",
+    benchmark:
+        "results/benchmarks/turbulence/{key}.tsv"
+    shell:
+        "{LUCKYAO} turbulence --spec {params.spec:q} --screens {output.screens}"
+        " --metadata {output.metadata} 2> {log}"
