@@ -5,6 +5,7 @@
 
 include: "workflow/rules/common.smk"
 include: "workflow/rules/turbulence.smk"
+include: "workflow/rules/reconstructor.smk"
 include: "workflow/rules/simulate.smk"
 include: "workflow/rules/lucky.smk"
 include: "workflow/rules/figures.smk"

@@ -1,8 +1,11 @@
-"""Benchmark: ms per simulated 2.5 ms step, by stage, for the on-axis no-AO case.
+"""Benchmark: ms per simulated 2.5 ms step, by stage, for the default on-axis case.
 
-Single thread. Uses the base system of config/config.yaml with screens for a
-short stretch of time (the per-step cost does not depend on the duration).
-The last line is ``ms_per_step <number>`` (propagation + science image + truth).
+Single thread. Uses the base system of config/config.yaml (no AO; 4 Rayleigh LGS
+with 8x8 open-loop Shack-Hartmann WFS, tomography and the lgs_rms criterion)
+with screens for a short stretch of time (the per-step cost does not depend on
+the duration). Prints ``ms_per_step_camera <number>`` (propagation + science
+image + truth: the no-LGS pipeline) and, last, ``ms_per_step <number>``: the
+whole pipeline of the default case.
 
 Run: .venv/bin/python benchmarks/bench_step.py [config.yaml]
 """
@@ -19,9 +22,11 @@ from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from luckyao.config import load_study, turbulence_spec  # noqa: E402
+from luckyao.config import load_study, reconstructor_spec, turbulence_spec  # noqa: E402
 from luckyao.imaging import Imager  # noqa: E402
 from luckyao.propagation import Propagator  # noqa: E402
+from luckyao.reconstructor import build_reconstructors  # noqa: E402
+from luckyao.sensing import LgsSensing  # noqa: E402
 from luckyao.pupil import TiltRemover  # noqa: E402
 from luckyao.simulate import System  # noqa: E402
 from luckyao.turbulence import read_screens, write_screens  # noqa: E402
@@ -41,18 +46,26 @@ def main(config_path="config/config.yaml"):
         screens = read_screens(Path(tmp) / "s.npy", Path(tmp) / "s.nc")
         system = System.from_config(case)
         imager = Imager(system.telescope, system.camera)
-        x, y = imager.grid.xy_m
-        propagator = Propagator(list(system.layers), screens, list(system.targets), x[imager.mask], y[imager.mask])
+        propagator = Propagator(list(system.layers), screens, list(system.targets), imager.grid,
+                                mask=imager.mask)
         tilt = TiltRemover.for_mask(imager.grid, imager.mask)
         to_camera = np.float32(REFERENCE_WAVELENGTH_M / system.camera.wavelength_m)
         np.asarray(screens.flat).sum()  # page the memory-mapped screens in
         for step in range(8):  # warm up: JIT, FFT plans
-            imager.intensity(propagator.sample(step, system.layer_scale(step)) * to_camera)
-        stages = dict.fromkeys(["propagation", "science image", "truth rms", "frame"], 0.0)
+            imager.intensity(propagator.sample(step, system.layer_scale(step))[:, imager.mask] * to_camera)
+        start = time.perf_counter()
+        reconstructors = build_reconstructors(reconstructor_spec(case))["reconstructor"].values
+        print(f"reconstructor ({case['wfs']['n_subapertures']}x{case['wfs']['n_subapertures']}): "
+              f"{time.perf_counter() - start:.1f} s")
+        sensing = LgsSensing(case, list(system.layers), screens, reconstructors, seed=1)
+        for step in range(2):
+            sensing.step(step, system.layer_scale(step))
+        camera = ["propagation", "science image", "truth rms", "frame"]
+        stages = dict.fromkeys(camera + ["LGS propagation", "WFS", "reconstruction"], 0.0)
         intensity = None
         for step in range(N_STEPS):
             t0 = time.perf_counter()
-            phase = propagator.sample(step, system.layer_scale(step))
+            phase = propagator.sample(step, system.layer_scale(step))[:, imager.mask]
             t1 = time.perf_counter()
             image = imager.intensity(phase * to_camera)
             intensity = image if intensity is None else intensity + image
@@ -63,12 +76,20 @@ def main(config_path="config/config.yaml"):
                 imager.to_pixels(intensity / system.steps_per_frame)
                 intensity = None
             t4 = time.perf_counter()
-            for name, dt in zip(stages, (t1 - t0, t2 - t1, t3 - t2, t4 - t3)):
+            complete = sensing.sample(step, system.layer_scale(step))
+            t5 = t6 = time.perf_counter()
+            if complete:
+                slopes = sensing.slopes()
+                t6 = time.perf_counter()
+                sensing.rms_nm(slopes)
+            t7 = time.perf_counter()
+            for name, dt in zip(stages, (t1 - t0, t2 - t1, t3 - t2, t4 - t3, t5 - t4, t6 - t5, t7 - t6)):
                 stages[name] += dt
     print(f"pupil {imager.grid.n_pix}^2 samples ({imager.n_valid} in the pupil), FFT {imager.fft_size}^2, "
           f"{len(system.layers)} layers, {N_STEPS} steps, single thread")
     for name, total in stages.items():
-        print(f"{name:>14s}: {1e3 * total / N_STEPS:.3f} ms per step")
+        print(f"{name:>16s}: {1e3 * total / N_STEPS:.3f} ms per step")
+    print(f"ms_per_step_camera {1e3 * sum(stages[name] for name in camera) / N_STEPS:.3f}")
     print(f"ms_per_step {1e3 * sum(stages.values()) / N_STEPS:.3f}")
 
 

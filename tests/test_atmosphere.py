@@ -37,7 +37,7 @@ def test_structure_function_is_the_transform_of_the_psd():
 
 def _empirical_structure_functions(n_screens=24):
     """Mean D(r)/theory along and across the strip over independent screens, and its standard error."""
-    spec = StripSpec(dx_m=DX_M, samples_per_step=1, n_along=4096, n_across=336, origin_m=(0.0, 0.0))
+    spec = StripSpec(dx_m=DX_M, shift_per_step=1.0, n_along=4096, n_across=336, origin_m=(0.0, 0.0))
     lags = np.array([2, 10, 20, 40, 84])  # 0.1 m ... 4.2 m = D
     ratios = []
     for seed in range(n_screens):
@@ -71,7 +71,7 @@ def test_r0_and_wavelength_scaling():
     d800 = von_karman_structure_function(r, r0_at_wavelength(0.135, 800e-9), L0_M)
     np.testing.assert_allclose(d800, d500 * (500 / 800) ** 2, rtol=1e-10)
     # a normalised screen scaled by r0^(-5/6) has the structure function of r0
-    spec = StripSpec(dx_m=DX_M, samples_per_step=1, n_along=4096, n_across=336, origin_m=(0.0, 0.0))
+    spec = StripSpec(dx_m=DX_M, shift_per_step=1.0, n_along=4096, n_across=336, origin_m=(0.0, 0.0))
     screen = strip_screen(spec, L0_M, np.random.default_rng(7)).astype(np.float64)
     for r0 in (0.1, 0.2):
         scaled = r0 ** (-5 / 6) * screen
@@ -88,10 +88,10 @@ def test_sinusoidal_r0():
     assert r0.mean() == pytest.approx(0.15, abs=1e-9)
 
 
-def test_strip_spec_makes_wind_shift_a_whole_number_of_samples():
+def test_strip_spec_holds_the_whole_flow():
     layer = Layer(9000.0, 0.043, 38.8, 252.0)
     spec = strip_spec(layer, 0.0025, 1000, 0.033, 5.0, 100.0, 16.8)
-    assert spec.dx_m <= 0.033
-    assert spec.samples_per_step * spec.dx_m == pytest.approx(38.8 * 0.0025)
+    assert spec.dx_m == 0.033
+    assert spec.shift_per_step * spec.dx_m == pytest.approx(38.8 * 0.0025)
     assert spec.n_along * spec.dx_m >= 1000 * 38.8 * 0.0025 + 10.0
     assert spec.n_across * spec.dx_m >= 16.8

@@ -5,41 +5,39 @@ import pytest
 
 from luckyao.atmosphere import Layer, strip_screen, strip_spec
 from luckyao.propagation import LineOfSight, Propagator, ScreenSet, footprint_m
+from luckyao.pupil import PupilGrid
 
 DT_S = 0.0025
-
-
-def _pupil_points(n=24, diameter_m=4.2):
-    c = (np.arange(n) - (n - 1) / 2) * diameter_m / n
-    x, y = np.meshgrid(c, c)
-    return x.ravel(), y.ravel()
+GRID = PupilGrid(24, 4.2 / 24)
 
 
 def _single_layer(height_m, speed, direction_deg, n_steps=200, radius_m=4.0, seed=3):
     layer = Layer(height_m, 1.0, speed, direction_deg)
     spec = strip_spec(layer, DT_S, n_steps, 0.03, radius_m, 30.0, 12.0)
     screen = strip_screen(spec, 20.0, np.random.default_rng(seed))
-    return layer, spec, screen
+    return layer, ScreenSet.from_screens([spec], [screen]), screen
 
 
 def test_plane_screen_is_sampled_exactly_on_and_off_axis_with_cone_and_wind():
     """A screen linear in position is reproduced exactly by bilinear interpolation,
     so this checks every geometric step: rotation to the wind frame, origin,
-    sample spacing, frozen-flow shift, cone scaling and off-axis offset."""
-    layer, spec, _ = _single_layer(5000.0, 13.0, 57.0)
+    sample spacing, frozen-flow shift, cone scaling, off-axis and grid offsets."""
+    layer, screens, _ = _single_layer(5000.0, 13.0, 57.0)
+    spec = screens.specs[0]
     a, b = 0.7, -1.3  # rad per m along and across the wind
     along = spec.origin_m[0] + np.arange(spec.n_along) * spec.dx_m
     across = spec.origin_m[1] + np.arange(spec.n_across) * spec.dx_m
-    plane = (a * along[:, None] + b * across[None, :]).astype(np.float32)
-    x, y = _pupil_points()
+    plane = ScreenSet.from_screens([spec], [(a * along[:, None] + b * across[None, :]).astype(np.float32)])
     lgs = LineOfSight(2e-5, -4e-5, 22000.0)
     star = LineOfSight(-1e-4, 5e-5)
-    prop = Propagator([layer], ScreenSet.from_screens([spec], [plane]), [star, lgs], x, y)
+    centre = (0.3, -0.2)
+    prop = Propagator([layer], plane, [star, lgs], GRID, centre_xy_m=centre)
+    x, y = GRID.xy_m
     e = layer.wind_unit
     for step in (0, 13, 150):
         phase = prop.sample(step, [1.0])
         for d, los in enumerate((star, lgs)):
-            fx, fy = footprint_m(x, y, layer.height_m, los)
+            fx, fy = footprint_m(x + centre[0], y + centre[1], layer.height_m, los)
             qx, qy = fx - e[0] * 13.0 * DT_S * step, fy - e[1] * 13.0 * DT_S * step
             expected = a * (qx * e[0] + qy * e[1]) + b * (-qx * e[1] + qy * e[0])
             np.testing.assert_allclose(phase[d], expected, atol=2e-3)
@@ -49,12 +47,11 @@ def test_frozen_flow_moves_the_screen_by_the_wind_vector():
     """The on-axis phase at step n equals the phase seen at step 0 through a line
     of sight displaced by -v n dt at the layer: the turbulence moved by v n dt."""
     height, speed, direction = 1000.0, 10.0, 30.0
-    layer, spec, screen = _single_layer(height, speed, direction)
-    x, y = _pupil_points()
+    layer, screens, _ = _single_layer(height, speed, direction)
     n = 7  # 0.175 m: not a whole number of pupil samples
     shift = speed * n * DT_S * np.array([np.cos(np.radians(direction)), np.sin(np.radians(direction))])
     displaced = LineOfSight(-shift[0] / height, -shift[1] / height)
-    prop = Propagator([layer], ScreenSet.from_screens([spec], [screen]), [LineOfSight(0.0, 0.0), displaced], x, y)
+    prop = Propagator([layer], screens, [LineOfSight(0.0, 0.0), displaced], GRID)
     moved = prop.sample(n, [1.0])[0]
     reference = prop.sample(0, [1.0])[1]
     np.testing.assert_allclose(moved, reference, atol=1e-4)
@@ -62,32 +59,29 @@ def test_frozen_flow_moves_the_screen_by_the_wind_vector():
 
 
 def test_cone_effect_scales_the_footprint():
-    layer, spec, screen = _single_layer(9000.0, 20.0, 200.0)
-    x, y = _pupil_points()
+    layer, screens, _ = _single_layer(9000.0, 20.0, 200.0)
     beacon_height = 22000.0
     scale = 1 - 9000.0 / beacon_height
-    lgs = Propagator([layer], ScreenSet.from_screens([spec], [screen]), [LineOfSight(0.0, 0.0, beacon_height)], x, y)
-    star = Propagator([layer], ScreenSet.from_screens([spec], [screen]), [LineOfSight(0.0, 0.0)], scale * x, scale * y)
+    lgs = Propagator([layer], screens, [LineOfSight(0.0, 0.0, beacon_height)], GRID)
+    star = Propagator([layer], screens, [LineOfSight(0.0, 0.0)], PupilGrid(GRID.n_pix, scale * GRID.dx_m))
     np.testing.assert_allclose(lgs.sample(5, [1.0]), star.sample(5, [1.0]), atol=1e-5)
 
 
 def test_layers_add_with_their_weights():
     l1, s1, screen1 = _single_layer(100.0, 5.0, 0.0, seed=1)
     l2, s2, screen2 = _single_layer(8000.0, 30.0, 250.0, seed=2)
-    x, y = _pupil_points()
     los = [LineOfSight(1e-5, 0.0)]
-    both = Propagator([l1, l2], ScreenSet.from_screens([s1, s2], [screen1, screen2]), los, x, y)
-    one = Propagator([l1], ScreenSet.from_screens([s1], [screen1]), los, x, y)
-    two = Propagator([l2], ScreenSet.from_screens([s2], [screen2]), los, x, y)
+    both = Propagator([l1, l2], ScreenSet.from_screens(s1.specs + s2.specs, [screen1, screen2]), los, GRID)
+    one = Propagator([l1], s1, los, GRID)
+    two = Propagator([l2], s2, los, GRID)
     np.testing.assert_allclose(both.sample(9, [0.5, 2.0]),
                                0.5 * one.sample(9, [1.0]) + 2.0 * two.sample(9, [1.0]), atol=1e-4)
 
 
 def test_leaving_the_screen_is_an_error():
-    layer, spec, screen = _single_layer(1000.0, 10.0, 0.0, n_steps=50)
-    x, y = _pupil_points()
-    prop = Propagator([layer], ScreenSet.from_screens([spec], [screen]), [LineOfSight(0.0, 0.0)], x, y)
+    layer, screens, _ = _single_layer(1000.0, 10.0, 0.0, n_steps=50)
+    prop = Propagator([layer], screens, [LineOfSight(0.0, 0.0)], GRID)
     with pytest.raises(IndexError):
         prop.sample(prop.n_steps_max, [1.0])
     with pytest.raises(ValueError, match="leaves its screen"):
-        Propagator([layer], ScreenSet.from_screens([spec], [screen]), [LineOfSight(0.0, 0.01)], x, y)  # 10 m across the wind
+        Propagator([layer], screens, [LineOfSight(0.0, 0.01)], GRID)  # 10 m across the wind

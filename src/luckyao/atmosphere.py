@@ -7,9 +7,8 @@ contributes ``r0 ** (-5/6) * sqrt(f) * screen`` (phase variance scales as
 ``r0 ∝ lambda ** (6/5)``.
 
 Each layer's screen is a long strip along its wind: axis 0 runs along the wind,
-axis 1 across it. Its sample spacing ``dx_m = |v| dt / k`` (an integer ``k`` >= 1)
-makes the frozen-flow shift per time step exactly ``k`` samples, so every
-sub-pixel interpolation weight is fixed in time and wind speeds are exact.
+axis 1 across it; frozen flow moves it by ``|v| dt / dx_m`` samples per time
+step (any real number: the propagator interpolates).
 """
 
 from dataclasses import dataclass
@@ -94,19 +93,19 @@ class R0Schedule:
 class StripSpec:
     """Sampling of one layer's strip screen.
 
-    ``samples_per_step`` (k) samples of ``dx_m`` make one time step of frozen flow;
+    ``shift_per_step`` samples of ``dx_m`` make one time step of frozen flow;
     ``origin_m`` is the (along, across) position of sample [0, 0] in the wind
     frame at t = 0; the array has shape ``(n_along, n_across)``.
     """
 
     dx_m: float
-    samples_per_step: int
+    shift_per_step: float
     n_along: int
     n_across: int
     origin_m: tuple[float, float]
 
 
-def strip_spec(layer: Layer, time_step_s: float, n_steps: int, max_dx_m: float,
+def strip_spec(layer: Layer, time_step_s: float, n_steps: int, dx_m: float,
                radius_m: float, min_along_m: float, min_across_m: float) -> StripSpec:
     """Strip that holds every footprint within ``radius_m`` of the axis for ``n_steps``.
 
@@ -115,15 +114,14 @@ def strip_spec(layer: Layer, time_step_s: float, n_steps: int, max_dx_m: float,
     sizes keep the large scales right (see ``strip_screen``).
     """
     step_m = layer.wind_speed_m_s * time_step_s
-    k = int(np.ceil(step_m / max_dx_m - 1e-9)) if step_m > 0 else 0
-    dx = step_m / k if k else max_dx_m
+    dx = dx_m
     margin = 2 * dx
     along_m = max(2 * (radius_m + margin) + n_steps * step_m, min_along_m)
     across_m = max(2 * (radius_m + margin), min_across_m)
     n_along = scipy.fft.next_fast_len(int(np.ceil(along_m / dx)) + 2)
     n_across = scipy.fft.next_fast_len(int(np.ceil(across_m / dx)) + 2)
     origin = (-(radius_m + margin) - n_steps * step_m, -(n_across - 1) * dx / 2)
-    return StripSpec(dx_m=dx, samples_per_step=k, n_along=n_along, n_across=n_across, origin_m=origin)
+    return StripSpec(dx_m=dx, shift_per_step=step_m / dx, n_along=n_along, n_across=n_across, origin_m=origin)
 
 
 def _across_rows(dfy: float, refined: int, split: int, subharmonic_levels: int):

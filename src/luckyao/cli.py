@@ -3,7 +3,8 @@
     luckyao check CONFIG
     luckyao turbulence --spec JSON --screens S.npy --metadata S.nc
     luckyao simulate --case JSON --name NAME --seed N --screens S.npy --screens-metadata S.nc
-                     --frames F --telemetry T
+                     [--reconstructor R.nc] --frames F --telemetry T
+    luckyao reconstructor --spec JSON --out R.nc
     luckyao lucky --settings JSON --frames F --telemetry T --out lucky.nc
     luckyao figure --id ID --settings JSON --out-prefix figures/ID  lucky.nc ...
 """
@@ -36,18 +37,24 @@ def cmd_turbulence(args) -> None:
 
 
 def cmd_simulate(args) -> None:
-    from .datasets import FrameWriter, provenance, write_dataset
+    from .datasets import FrameWriter, open_dataset, provenance, write_dataset
     from .simulate import System, simulate
     from .turbulence import read_screens
 
     case = json.loads(args.case)
     system = System.from_config(case)
     screens = read_screens(args.screens, args.screens_metadata)
+    sensing = None
+    if args.reconstructor:
+        from .sensing import LgsSensing
+
+        reconstructors = open_dataset(args.reconstructor, "reconstructor")["reconstructor"].values
+        sensing = LgsSensing(case, list(system.layers), screens, reconstructors, args.seed)
     attrs = provenance(f"luckyao frames of case {args.name}", case, args.seed)
     start = time.perf_counter()
     with FrameWriter(args.frames, len(system.targets), system.n_frames, system.camera.n_pixels,
                      system.camera.pixel_scale_arcsec, attrs) as writer:
-        telemetry = simulate(system, screens, writer.write)
+        telemetry = simulate(system, screens, writer.write, sensing)
     elapsed = time.perf_counter() - start
     steps = system.n_frames * system.steps_per_frame
     logging.getLogger(__name__).info("simulated %d steps in %.1f s: %.3f ms per step (with I/O)",
@@ -55,6 +62,16 @@ def cmd_simulate(args) -> None:
     telemetry.attrs.update(provenance(f"luckyao telemetry of case {args.name}", case, args.seed))
     telemetry.attrs["case"] = args.name
     write_dataset(telemetry, args.telemetry)
+
+
+def cmd_reconstructor(args) -> None:
+    from .datasets import provenance, write_dataset
+    from .reconstructor import build_reconstructors
+
+    spec = json.loads(args.spec)
+    ds = build_reconstructors(spec)
+    ds.attrs.update(provenance("luckyao tomographic reconstructors", spec, 0))
+    write_dataset(ds, args.out, compress=False)
 
 
 def cmd_lucky(args) -> None:
@@ -90,9 +107,15 @@ def main(argv=None) -> int:
     p.add_argument("--seed", type=int, required=True)
     p.add_argument("--screens", required=True)
     p.add_argument("--screens-metadata", required=True)
+    p.add_argument("--reconstructor", default="", help="reconstructor file (cases with LGS)")
     p.add_argument("--frames", required=True)
     p.add_argument("--telemetry", required=True)
     p.set_defaults(func=cmd_simulate)
+
+    p = sub.add_parser("reconstructor", help="build the tomographic reconstructors of a case")
+    p.add_argument("--spec", required=True, help="reconstructor spec as JSON")
+    p.add_argument("--out", required=True)
+    p.set_defaults(func=cmd_reconstructor)
 
     p = sub.add_parser("lucky", help="detector noise, selection, shift-and-add, scores")
     p.add_argument("--settings", required=True, help="lucky settings as JSON")
@@ -105,7 +128,7 @@ def main(argv=None) -> int:
     p.add_argument("--id", required=True)
     p.add_argument("--settings", required=True, help="figure settings as JSON")
     p.add_argument("--out-prefix", required=True)
-    p.add_argument("inputs", nargs="+", help="lucky.nc files of the figure's cases, in order")
+    p.add_argument("inputs", nargs="*", help="lucky.nc files of the figure's cases, in order")
     p.set_defaults(func=cmd_figure)
 
     args = parser.parse_args(argv)

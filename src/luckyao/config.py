@@ -78,6 +78,13 @@ def _check_case(name: str, case: dict, turbulence: dict) -> None:
     if case["duration_s"] > turbulence["duration_s"] + 1e-9:
         raise ConfigError(f"config key '{where}.duration_s': {case['duration_s']} s exceeds "
                           f"turbulence.duration_s = {turbulence['duration_s']} s")
+    tomo = case["tomography"]
+    if len(tomo["layer_cn2_fraction"]) != len(tomo["layer_heights_m"]):
+        raise ConfigError(f"config key '{where}.tomography.layer_cn2_fraction': has "
+                          f"{len(tomo['layer_cn2_fraction'])} values, layer_heights_m has {len(tomo['layer_heights_m'])}")
+    if case["lgs"]["enabled"] and steps % case["wfs"]["exposure_steps"]:
+        raise ConfigError(f"config key '{where}.wfs.exposure_steps': must divide the {round(steps)} steps "
+                          "of a camera frame")
     if case["telescope"]["obscuration_m"] >= case["telescope"]["diameter_m"]:
         raise ConfigError(f"config key '{where}.telescope.obscuration_m': must be below diameter_m")
     radius = turbulence["field_radius_arcsec"]
@@ -151,6 +158,17 @@ def turbulence_spec(study: dict, case: dict) -> dict:
 
 def turbulence_key(spec: dict) -> str:
     return "screens_" + sha256(spec)[:12]
+
+
+def reconstructor_spec(case: dict) -> dict | None:
+    """Everything a case's tomographic reconstructor depends on (None without LGS)."""
+    if not case["lgs"]["enabled"]:
+        return None
+    return {key: case[key] for key in ("telescope", "lgs", "wfs", "tomography", "targets_arcsec")}
+
+
+def reconstructor_key(spec: dict) -> str:
+    return "reconstructor_" + sha256(spec)[:12]
 
 
 def lucky_settings(study: dict, case_name: str) -> dict:

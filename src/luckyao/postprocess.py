@@ -14,7 +14,7 @@ import xarray as xr
 from .config import canonical_json
 from .datasets import case_config, iter_frame_blocks, open_dataset, provenance, write_dataset
 from .detector import Detector
-from .lucky import run_lucky
+from .lucky import ExternalCriterion, run_lucky
 
 log = logging.getLogger(__name__)
 
@@ -37,16 +37,23 @@ def lucky_case(settings: dict, frames_path, telemetry_path, out_path) -> None:
     per_target = []
     for target in range(telemetry.sizes["target"]):
         log.info("target %d/%d", target + 1, telemetry.sizes["target"])
+        external = []
+        if "lgs_rms_nm" in telemetry:
+            external.append(ExternalCriterion("lgs_rms", telemetry.lgs_rms_nm.values[target], False, "nm",
+                                              "LGS tomographic tilt-removed rms along the target"))
         per_target.append(run_lucky(
             iter_frame_blocks(frames_path, target), n_frames, detectors, settings["fractions"],
-            float(telemetry.attrs["diffraction_limited_peak"]), pixel_scale, settings["seed"] + target))
+            float(telemetry.attrs["diffraction_limited_peak"]), pixel_scale, settings["seed"] + target,
+            criteria_external=external))
     ds = xr.concat(per_target, dim="target", data_vars="all", coords="minimal", compat="override")
     n_blocks = settings.get("error_blocks", 5)
     errors = [batch_mean_error(telemetry.axis_strehl.values[t], n_blocks) for t in range(ds.sizes["target"])]
     ds["long_exposure_strehl_error"] = ("target", errors, {
         "units": "1", "long_name": f"Monte-Carlo standard error of the long-exposure Strehl (no recentring), "
                                    f"from {n_blocks} batch means"})
-    ds["true_rms_nm"] = telemetry.true_rms_nm
+    for name in ("true_rms_nm", "lgs_rms_nm"):
+        if name in telemetry:
+            ds[name] = telemetry[name]
     ds["mean_r0_500nm_m"] = ((), float(telemetry.r0_500nm_m.mean()),
                              {"units": "m", "long_name": "mean Fried parameter at 500 nm over the case"})
     ds = ds.assign_coords(target_x_arcsec=telemetry.target_x_arcsec, target_y_arcsec=telemetry.target_y_arcsec)

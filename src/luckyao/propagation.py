@@ -3,10 +3,10 @@
 A ray from pupil point ``g`` [m] towards direction ``theta`` [rad] from a
 source at height ``H`` crosses the layer at height ``h`` at
 ``(1 - h/H) g + theta h`` (cone effect; ``H = inf`` for a star). The phase
-there is the layer's strip screen, moved by frozen flow, sampled by bilinear
-interpolation. Because each strip moves by a whole number of its samples per
-time step (see ``atmosphere``), the interpolation taps and weights are
-computed once; a step only offsets them.
+there is the layer's strip screen, moved by frozen flow (any sub-sample shift),
+sampled by bilinear interpolation. The footprints of a regular pupil grid are
+an affine image of it on each strip, so a compiled kernel computes every tap
+and weight on the fly: nothing but the screens is read from memory.
 """
 
 from dataclasses import dataclass
@@ -15,6 +15,7 @@ import numba
 import numpy as np
 
 from .atmosphere import Layer, StripSpec
+from .pupil import PupilGrid
 
 
 @dataclass(frozen=True)
@@ -34,29 +35,44 @@ def footprint_m(points_x_m, points_y_m, layer_height_m, los: LineOfSight):
 
 
 @numba.njit(cache=True, fastmath=True, nogil=True)
-def _sample_kernel(screens, starts, strides, shifts, order, base, frac, layer_scale, out):
-    """out[d, p] = sum_l scale[l] * bilinear(screen_l at point p, shifted by shift[l]).
+def _sample_kernel(screens, starts, strides, shifts, affine, row_start, row_end, layer_scale,
+                   out):  # pragma: no cover (jit)
+    """out[d, y, x] = sum_l scale[l] * bilinear(screen_l at the grid point's footprint),
+    for ``row_start[y] <= x < row_end[y]`` (zero elsewhere).
 
-    Entry ``q`` of ``base[d, l]`` and ``frac[d, l]`` (fractional along, across
-    offsets) belongs to point ``order[d, l, q]``; entries ascend in screen index
-    so the screen is read front to back.
+    ``affine[d, l]`` = (along0, across0, d_along/dx, d_across/dx, d_along/dy,
+    d_across/dy) in screen samples at t = 0; ``shifts[l]`` the frozen-flow shift
+    [samples along the wind] now. Per row, a first loop computes taps and
+    weights (vectorisable), a second gathers and blends.
     """
-    n_dir, n_layer, n_pix = base.shape
+    n_dir, n_y, n_x = out.shape
+    tap = np.empty(n_x, np.int64)
+    w_along = np.empty(n_x, np.float32)
+    w_across = np.empty(n_x, np.float32)
+    out[:] = 0.0
     for d in range(n_dir):
-        for p in range(n_pix):
-            out[d, p] = 0.0
-        for l in range(n_layer):
-            origin = starts[l] - shifts[l]
+        for l in range(starts.shape[0]):
+            origin = starts[l]
             stride = strides[l]
-            s = layer_scale[l]
-            for q in range(n_pix):
-                p = order[d, l, q]
-                i = origin + base[d, l, q]
-                fa = frac[d, l, q, 0]
-                fc = frac[d, l, q, 1]
-                low = screens[i] + fc * (screens[i + 1] - screens[i])
-                high = screens[i + stride] + fc * (screens[i + stride + 1] - screens[i + stride])
-                out[d, p] += s * (low + fa * (high - low))
+            scale = np.float32(layer_scale[l])
+            a0 = affine[d, l, 0] - shifts[l]
+            c0, a_x, c_x, a_y, c_y = affine[d, l, 1], affine[d, l, 2], affine[d, l, 3], affine[d, l, 4], affine[d, l, 5]
+            for y in range(n_y):
+                row_a = a0 + y * a_y
+                row_c = c0 + y * c_y
+                for x in range(row_start[y], row_end[y]):
+                    along = row_a + x * a_x
+                    across = row_c + x * c_x
+                    i = np.int64(along)
+                    j = np.int64(across)
+                    w_along[x] = along - i
+                    w_across[x] = across - j
+                    tap[x] = origin + i * stride + j
+                for x in range(row_start[y], row_end[y]):
+                    k = tap[x]
+                    low = screens[k] + w_across[x] * (screens[k + 1] - screens[k])
+                    high = screens[k + stride] + w_across[x] * (screens[k + stride + 1] - screens[k + stride])
+                    out[d, y, x] += scale * (low + w_along[x] * (high - low))
 
 
 @dataclass(frozen=True, eq=False)
@@ -84,62 +100,66 @@ class ScreenSet:
 
 
 class Propagator:
-    """Samples the summed layer phases on pupil points for several lines of sight.
+    """Samples the summed layer phases on a pupil grid for several lines of sight.
 
-    ``screens`` holds the layers' strips; ``points_x_m``/``points_y_m`` are the
-    pupil points (n_pix,) [m].
+    ``grid`` (centred on ``centre_xy_m`` [m] in the pupil) is sampled for each
+    line of sight, where ``mask`` (n, n) is true (default: everywhere; the
+    samples of a row between its first and last true one are computed, others
+    are zero); ``screens`` holds the layers' strips.
     """
 
-    def __init__(self, layers: list[Layer], screens: ScreenSet,
-                 lines_of_sight: list[LineOfSight], points_x_m, points_y_m):
+    def __init__(self, layers: list[Layer], screens: ScreenSet, lines_of_sight: list[LineOfSight],
+                 grid: PupilGrid, centre_xy_m=(0.0, 0.0), mask: np.ndarray | None = None):
         specs = screens.specs
         if len(specs) != len(layers):
             raise ValueError(f"{len(layers)} layers but {len(specs)} screens")
+        self.grid = grid
+        mask = np.ones((grid.n_pix, grid.n_pix), bool) if mask is None else np.asarray(mask, bool)
+        has = mask.any(axis=1)
+        self._row_start = np.where(has, mask.argmax(axis=1), 0).astype(np.int64)
+        self._row_end = np.where(has, grid.n_pix - mask[:, ::-1].argmax(axis=1), 0).astype(np.int64)
         self._screens = screens.flat
         self._starts = screens.starts
         self._strides = np.array([s.n_across for s in specs], dtype=np.int64)
-        self._k = np.array([s.samples_per_step for s in specs], dtype=np.int64)
-        n_pix = len(points_x_m)
-        shape = (len(lines_of_sight), len(layers), n_pix)
-        self._base = np.empty(shape, dtype=np.int32)
-        self._frac = np.empty(shape + (2,), dtype=np.float32)
+        self._shift = np.array([s.shift_per_step for s in specs])
+        self._affine = np.empty((len(lines_of_sight), len(layers), 6))
+        first_row = np.full(len(layers), np.inf)
+        c = grid.coords_m
+        corners_x = centre_xy_m[0] + np.array([c[0], c[-1], c[0], c[-1]])
+        corners_y = centre_xy_m[1] + np.array([c[0], c[0], c[-1], c[-1]])
         for d, los in enumerate(lines_of_sight):
             for l, (layer, spec) in enumerate(zip(layers, specs)):
-                x, y = footprint_m(points_x_m, points_y_m, layer.height_m, los)
-                self._base[d, l], self._frac[d, l] = _bilinear_taps(x, y, layer, spec)
-        # store each (direction, layer)'s points in ascending screen index
-        self._order = np.argsort(self._base, axis=-1, kind="stable").astype(np.int32)
-        self._base = np.take_along_axis(self._base, self._order, axis=-1)
-        self._frac = np.take_along_axis(self._frac, self._order[..., None], axis=-2)
-        first_row = (self._base // self._strides[None, :, None]).min(axis=(0, 2))
-        moving = self._k > 0
-        self.n_steps_max = int(np.min(first_row[moving] // self._k[moving] + 1)) if moving.any() else 2**62
+                origin = _screen_position(*footprint_m(corners_x[0], corners_y[0], layer.height_m, los), layer, spec)
+                step_x = _screen_position(*footprint_m(corners_x[0] + grid.dx_m, corners_y[0], layer.height_m, los),
+                                          layer, spec) - origin
+                step_y = _screen_position(*footprint_m(corners_x[0], corners_y[0] + grid.dx_m, layer.height_m, los),
+                                          layer, spec) - origin
+                self._affine[d, l] = [origin[0], origin[1], step_x[0], step_x[1], step_y[0], step_y[1]]
+                along, across = _screen_position(*footprint_m(corners_x, corners_y, layer.height_m, los), layer, spec)
+                if (along.min() < 0 or along.max() + 1 >= spec.n_along or across.min() < 0
+                        or across.max() + 1 >= spec.n_across):
+                    raise ValueError(f"footprint at height {layer.height_m} m leaves its screen: "
+                                     "raise turbulence.field_radius_arcsec or shorten the case")
+                first_row[l] = min(first_row[l], along.min())
+        moving = self._shift > 0
+        self.n_steps_max = int(np.min(np.floor(first_row[moving] / self._shift[moving])) + 1) if moving.any() else 2**62
         """Steps for which every footprint stays on its screen."""
 
     def sample(self, step: int, layer_scale) -> np.ndarray:
-        """Phases (n_los, n_pix) float32 at time step ``step``; layer ``l`` weighted by
-        ``layer_scale[l]`` (e.g. r0^-5/6 sqrt(Cn2 fraction) for rad at 500 nm)."""
+        """Phases (n_los, n, n) float32 on the grid at time step ``step``; layer ``l``
+        weighted by ``layer_scale[l]`` (e.g. r0^-5/6 sqrt(Cn2 fraction): rad at 500 nm)."""
         if not 0 <= step < self.n_steps_max:
             raise IndexError(f"step {step} outside the screens' {self.n_steps_max} steps")
-        out = np.empty(self._base.shape[::2], dtype=np.float32)
-        _sample_kernel(self._screens, self._starts, self._strides, step * self._k * self._strides,
-                       self._order, self._base, self._frac, np.asarray(layer_scale, dtype=np.float32), out)
+        n = self.grid.n_pix
+        out = np.empty((self._affine.shape[0], n, n), dtype=np.float32)
+        _sample_kernel(self._screens, self._starts, self._strides, step * self._shift, self._affine,
+                       self._row_start, self._row_end, np.asarray(layer_scale, dtype=np.float32), out)
         return out
 
 
-def _bilinear_taps(x_m, y_m, layer: Layer, spec: StripSpec):
-    """Flat index (within the layer) of each point's first tap at t = 0 and its
-    fractional (along, across) offsets, for points (x, y) [m] in the sky frame."""
+def _screen_position(x_m, y_m, layer: Layer, spec: StripSpec) -> np.ndarray:
+    """(along, across) position [samples] on the layer's strip at t = 0 of sky points [m]."""
     e = layer.wind_unit
-    along = (x_m * e[0] + y_m * e[1] - spec.origin_m[0]) / spec.dx_m
-    across = (-x_m * e[1] + y_m * e[0] - spec.origin_m[1]) / spec.dx_m
-    i = np.floor(along).astype(np.int64)
-    j = np.floor(across).astype(np.int64)
-    if i.min() < 0 or i.max() + 1 >= spec.n_along or j.min() < 0 or j.max() + 1 >= spec.n_across:
-        raise ValueError(
-            f"footprint at height {layer.height_m} m leaves its screen: "
-            "raise turbulence.field_radius_arcsec or shorten the case")
-    if spec.n_along * spec.n_across >= 2**31:
-        raise ValueError(f"screen of layer at {layer.height_m} m has over 2^31 samples")
-    frac = np.stack([along - i, across - j], axis=-1).astype(np.float32)
-    return (i * spec.n_across + j).astype(np.int32), frac
+    along = (np.asarray(x_m) * e[0] + np.asarray(y_m) * e[1] - spec.origin_m[0]) / spec.dx_m
+    across = (-np.asarray(x_m) * e[1] + np.asarray(y_m) * e[0] - spec.origin_m[1]) / spec.dx_m
+    return np.array([along, across])

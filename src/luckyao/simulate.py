@@ -17,6 +17,7 @@ from .atmosphere import Layer, R0Schedule
 from .imaging import Camera, Imager
 from .propagation import LineOfSight, Propagator, ScreenSet
 from .pupil import Telescope, TiltRemover
+from .sensing import LgsSensing
 from .units import ARCSEC_RAD, REFERENCE_WAVELENGTH_M, phase_rad_to_nm
 
 log = logging.getLogger(__name__)
@@ -78,9 +79,11 @@ class Progress:
                  100 * done / self.total, rate, eta)
 
 
-def simulate(system: System, screens: ScreenSet, write_frames, block_frames: int = 32) -> xr.Dataset:
+def simulate(system: System, screens: ScreenSet, write_frames, sensing: LgsSensing | None = None,
+             block_frames: int = 32) -> xr.Dataset:
     """Run the case; ``write_frames(start, frames (target, k, n, n))`` receives the
-    noiseless unit-flux frames. Returns the telemetry dataset.
+    noiseless unit-flux frames. Returns the telemetry dataset. With ``sensing``,
+    the LGS chain runs alongside and gives each frame's ``lgs_rms_nm``.
 
     Per frame it records the truth (tilt-removed rms) and the frame's value on
     the optical axis over the diffraction-limited peak, whose mean over frames
@@ -88,19 +91,20 @@ def simulate(system: System, screens: ScreenSet, write_frames, block_frames: int
     Monte-Carlo error follows from batch means.
     """
     imager = Imager(system.telescope, system.camera)
-    x, y = imager.grid.xy_m
     mask = imager.mask
-    propagator = Propagator(list(system.layers), screens, list(system.targets), x[mask], y[mask])
+    propagator = Propagator(list(system.layers), screens, list(system.targets), imager.grid, mask=mask)
     tilt = TiltRemover.for_mask(imager.grid, mask)
     n_targets, n_frames, spf = len(system.targets), system.n_frames, system.steps_per_frame
-    if n_frames * spf > propagator.n_steps_max:
-        raise ValueError(f"the screens hold {propagator.n_steps_max} steps, the case needs {n_frames * spf}")
+    steps_max = min(propagator.n_steps_max, sensing.n_steps_max if sensing else propagator.n_steps_max)
+    if n_frames * spf > steps_max:
+        raise ValueError(f"the screens hold {steps_max} steps, the case needs {n_frames * spf}")
     to_camera = np.float32(REFERENCE_WAVELENGTH_M / system.camera.wavelength_m)
     n_pix = system.camera.n_pixels
 
     true_rms_nm = np.empty((n_targets, n_frames), dtype=np.float32)
     r0_frame = np.empty(n_frames)
     axis_strehl = np.empty((n_targets, n_frames), dtype=np.float32)
+    lgs_rms = np.full((n_targets, n_frames), np.nan, dtype=np.float32)
     progress = Progress(n_frames, "frames")
     buffer = np.empty((n_targets, block_frames, n_pix, n_pix), dtype=np.float32)
     for start in range(0, n_frames, block_frames):
@@ -109,12 +113,21 @@ def simulate(system: System, screens: ScreenSet, write_frames, block_frames: int
             frame = start + j
             intensity = None
             rms2 = np.zeros(n_targets)
+            lgs_rms2, exposures = np.zeros(n_targets), 0
             for s in range(spf):
                 step = frame * spf + s
-                phase_500 = propagator.sample(step, system.layer_scale(step))
+                layer_scale = system.layer_scale(step)
+                phase_500 = propagator.sample(step, layer_scale)[:, mask]
                 image = imager.intensity(phase_500 * to_camera)
                 intensity = image if intensity is None else intensity + image
                 rms2 += tilt.rms(phase_500) ** 2
+                if sensing is not None:
+                    exposure_rms = sensing.step(step, layer_scale)
+                    if exposure_rms is not None:
+                        lgs_rms2 += exposure_rms**2
+                        exposures += 1
+            if exposures:
+                lgs_rms[:, frame] = np.sqrt(lgs_rms2 / exposures)
             buffer[:, j] = imager.to_pixels(intensity / spf)
             axis_strehl[:, frame] = buffer[:, j, n_pix // 2, n_pix // 2] / imager.diffraction_limited_peak
             true_rms_nm[:, frame] = phase_rad_to_nm(np.sqrt(rms2 / spf), REFERENCE_WAVELENGTH_M)
@@ -123,8 +136,14 @@ def simulate(system: System, screens: ScreenSet, write_frames, block_frames: int
         progress.update(start + count)
 
     frame_time = spf * system.time_step_s
+    extra = {}
+    if sensing is not None:
+        extra["lgs_rms_nm"] = (("target", "frame"), lgs_rms, {
+            "units": "nm", "long_name": "tilt-removed rms of the LGS tomographic reconstruction along the "
+            "target, over the frame's WFS exposures"})
     return xr.Dataset(
         {
+            **extra,
             "true_rms_nm": (("target", "frame"), true_rms_nm,
                             {"units": "nm", "long_name": "tilt-removed rms of the residual wavefront "
                              "over the pupil and the frame's exposure"}),

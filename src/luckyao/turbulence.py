@@ -27,7 +27,8 @@ def strip_specs(spec: dict) -> list[StripSpec]:
     specs = []
     for height, speed in zip(spec["height_m"], spec["wind_speed_m_s"]):
         layer = Layer(height, 1.0, speed, 0.0)
-        radius = spec["diameter_m"] / 2 + spec["field_radius_arcsec"] * ARCSEC_RAD * height
+        # square pupil grids reach sqrt(2) D / 2 in their corners
+        radius = 0.75 * spec["diameter_m"] + spec["field_radius_arcsec"] * ARCSEC_RAD * height
         specs.append(strip_spec(layer, spec["time_step_s"], n_steps, spec["max_pixel_m"], radius,
                                 spec["min_along_m"], spec["min_across_m"]))
     return specs
@@ -54,7 +55,7 @@ def write_screens(spec: dict, screens_path, metadata_path, attrs: dict) -> None:
     ds = xr.Dataset(
         {
             "dx_m": ("layer", [s.dx_m for s in specs], {"units": "m", "long_name": "screen sample spacing"}),
-            "samples_per_step": ("layer", [s.samples_per_step for s in specs],
+            "shift_per_step": ("layer", [s.shift_per_step for s in specs],
                                  {"units": "1", "long_name": "frozen-flow shift per time step in samples"}),
             "n_along": ("layer", [s.n_along for s in specs], {"units": "1", "long_name": "samples along the wind"}),
             "n_across": ("layer", [s.n_across for s in specs], {"units": "1", "long_name": "samples across the wind"}),
@@ -74,7 +75,7 @@ def read_screens(screens_path, metadata_path) -> ScreenSet:
     """The screens, memory-mapped read-only, with their geometry."""
     meta = open_dataset(metadata_path, "turbulence metadata")
     specs = tuple(
-        StripSpec(dx_m=float(meta.dx_m[i]), samples_per_step=int(meta.samples_per_step[i]),
+        StripSpec(dx_m=float(meta.dx_m[i]), shift_per_step=float(meta.shift_per_step[i]),
                   n_along=int(meta.n_along[i]), n_across=int(meta.n_across[i]),
                   origin_m=(float(meta.origin_along_m[i]), float(meta.origin_across_m[i])))
         for i in range(meta.sizes["layer"]))

@@ -26,7 +26,8 @@ with axis 1 = (x, y) [rad]; images ``(n_beacons, n_valid, n_pixels, n_pixels)``.
 """
 
 from dataclasses import dataclass
-from functools import cached_property
+from functools import cached_property, lru_cache
+from types import SimpleNamespace
 
 import numba
 import numpy as np
@@ -329,6 +330,456 @@ def pixel_images(wfs: ShackHartmann, spectra: np.ndarray) -> np.ndarray:
     return np.matmul(np.matmul(e_y, spectra), e_x.T).real.astype(np.float32)
 
 
+# --- fused exposure kernel ------------------------------------------------------
+# Sub-apertures (and launch apertures) are processed in "lanes": blocks of
+# _LANES of them are stored innermost (..., _LANES) so that every FFT butterfly,
+# power accumulation and pixel integration is one SIMD loop over the lanes.
+# The 2-D transforms are radix-2 on N = 2^k >= 2 n_in samples (N may differ
+# from ``fft_size``: the Fourier coefficients of the intensity are those of
+# the autocorrelation of the field, independent of the padding as long as
+# N >= 2 n_in). The forward transform is decimation in frequency (natural in,
+# bit-reversed out), the intensity transform decimation in time (bit-reversed
+# in, natural out), so no bit reversal is ever done; the zero-padded half of
+# the field is pruned (the first DIF stage is a copy and a twiddle), and only
+# the p = 0..N/2-1 half-plane of the intensity spectrum is computed.
+_LANES = 48
+
+
+def _next_pow2(n: int) -> int:
+    return 1 << max(1, int(n - 1).bit_length())
+
+
+def _twiddles(n_fft: int) -> tuple[np.ndarray, np.ndarray]:
+    w = np.exp(-2j * np.pi * np.arange(n_fft // 2) / n_fft)
+    return w.real.astype(np.float32), w.imag.astype(np.float32)
+
+
+# The kernels work on flat float32 buffers with unsigned offsets and are
+# compiled per transform size (``n_fft``, ``n_in`` and the twiddles are
+# compile-time constants): that is what lets LLVM vectorise the lane loops
+# (signed 2-D indexing or a run-time size keeps them scalar, 5-8x slower).
+_U = numba.uint64
+
+
+@lru_cache(maxsize=None)
+def _lane_kernels(n_fft: int, n_in: int, n_pix: int = 0) -> SimpleNamespace:
+    """JIT kernels for transforms of ``n_fft`` (power of 2) samples of ``n_in``
+    inputs, images of ``n_pix`` x ``n_pix`` pixels."""
+    half = n_fft // 2
+    n_rows = max(n_in, half)
+    block = n_in * n_in * _LANES
+    tw_re, tw_im = _twiddles(n_fft)
+    lanes = _LANES
+    assert n_in <= half and n_fft >= 4
+
+    @numba.njit(nogil=True, inline="always")
+    def dif(re, im):  # pragma: no cover (jit)
+        """In-place radix-2 DIF stages N/4, .., 1 (the N/2 stage is in load_padded)."""
+        h = half // 2
+        while h >= 1:
+            step = n_fft // (2 * h)
+            for start in range(0, n_fft, 2 * h):
+                for k in range(h):
+                    wr = tw_re[k * step]
+                    wi = tw_im[k * step]
+                    o0 = _U((start + k) * lanes)
+                    o1 = _U((start + k + h) * lanes)
+                    for lane in range(lanes):
+                        ar = re[o0 + lane]
+                        ai = im[o0 + lane]
+                        br = re[o1 + lane]
+                        bi = im[o1 + lane]
+                        re[o0 + lane] = ar + br
+                        im[o0 + lane] = ai + bi
+                        dr = ar - br
+                        di = ai - bi
+                        re[o1 + lane] = dr * wr - di * wi
+                        im[o1 + lane] = dr * wi + di * wr
+            h //= 2
+
+    @numba.njit(nogil=True, inline="always")
+    def dit(re, im, lower_half_only):  # pragma: no cover (jit)
+        """In-place radix-2 DIT (bit-reversed in, natural out); with
+        ``lower_half_only`` the last stage only writes outputs 0..N/2-1."""
+        h = 1
+        while h < half:
+            step = n_fft // (2 * h)
+            for start in range(0, n_fft, 2 * h):
+                for k in range(h):
+                    wr = tw_re[k * step]
+                    wi = tw_im[k * step]
+                    o0 = _U((start + k) * lanes)
+                    o1 = _U((start + k + h) * lanes)
+                    for lane in range(lanes):
+                        br = re[o1 + lane]
+                        bi = im[o1 + lane]
+                        tr = br * wr - bi * wi
+                        ti = br * wi + bi * wr
+                        ar = re[o0 + lane]
+                        ai = im[o0 + lane]
+                        re[o0 + lane] = ar + tr
+                        im[o0 + lane] = ai + ti
+                        re[o1 + lane] = ar - tr
+                        im[o1 + lane] = ai - ti
+            h *= 2
+        for k in range(half):
+            wr = tw_re[k]
+            wi = tw_im[k]
+            o0 = _U(k * lanes)
+            o1 = _U((k + half) * lanes)
+            if lower_half_only:
+                for lane in range(lanes):
+                    br = re[o1 + lane]
+                    bi = im[o1 + lane]
+                    re[o0 + lane] += br * wr - bi * wi
+                    im[o0 + lane] += br * wi + bi * wr
+            else:
+                for lane in range(lanes):
+                    br = re[o1 + lane]
+                    bi = im[o1 + lane]
+                    tr = br * wr - bi * wi
+                    ti = br * wi + bi * wr
+                    ar = re[o0 + lane]
+                    ai = im[o0 + lane]
+                    re[o0 + lane] = ar + tr
+                    im[o0 + lane] = ai + ti
+                    re[o1 + lane] = ar - tr
+                    im[o1 + lane] = ai - ti
+
+    @numba.njit(nogil=True, inline="always")
+    def load_padded(src_re, src_im, src_offset, src_stride, re, im):  # pragma: no cover
+        """First DIF stage of a zero-padded input: buffer rows y and y + N/2 from
+        the ``n_in`` source rows at ``src_offset + y src_stride``."""
+        for y in range(n_in):
+            wr = tw_re[y]
+            wi = tw_im[y]
+            s = _U(src_offset + y * src_stride)
+            o0 = _U(y * lanes)
+            o1 = _U((y + half) * lanes)
+            for lane in range(lanes):
+                fr = src_re[s + lane]
+                fi = src_im[s + lane]
+                re[o0 + lane] = fr
+                im[o0 + lane] = fi
+                re[o1 + lane] = fr * wr - fi * wi
+                im[o1 + lane] = fr * wi + fi * wr
+        for y in range(n_in, half):
+            o0 = _U(y * lanes)
+            o1 = _U((y + half) * lanes)
+            for lane in range(lanes):
+                re[o0 + lane] = 0.0
+                im[o0 + lane] = 0.0
+                re[o1 + lane] = 0.0
+                im[o1 + lane] = 0.0
+
+    @numba.njit(nogil=True)
+    def buffers():  # pragma: no cover (jit)
+        return (np.empty(n_in * lanes, np.float32), np.empty(n_in * lanes, np.float32),
+                np.empty(n_fft * lanes, np.float32), np.empty(n_fft * lanes, np.float32),
+                np.empty(n_fft * n_rows * lanes, np.float32),
+                np.empty(n_fft * n_rows * lanes, np.float32),
+                np.empty(n_fft * n_fft * lanes, np.float32))
+
+    @numba.njit(nogil=True)
+    def chunk_spectrum(cos_p, sin_p, amp, n_steps, n_chunks, chunk, amp_chunk, work,
+                       c, c0):  # pragma: no cover (jit)
+        """Half-plane spectrum c[c0:] (N, N/2, re/im, L) of sum_t |FFT(amp exp(i phi_t))|^2.
+
+        Flat inputs: ``cos_p``/``sin_p`` (T, n_chunks, n_in, n_in, L) [y, x],
+        ``amp`` (n_amp, n_in, n_in, L); unnormalised: c = N^2 x autocorrelation.
+        """
+        col_re, col_im, buf_re, buf_im, rows_re, rows_im, power = work
+        for i in range(n_fft * n_fft * lanes):
+            power[i] = 0.0
+        a0 = _U(amp_chunk * block)
+        for t in range(n_steps):
+            f0 = _U((t * n_chunks + chunk) * block)
+            # y transform of the n_in non-zero columns (bit-reversed ky)
+            for x in range(n_in):
+                for y in range(n_in):
+                    o = _U((y * n_in + x) * lanes)
+                    d = _U(y * lanes)
+                    for lane in range(lanes):
+                        a = amp[a0 + o + lane]
+                        col_re[d + lane] = a * cos_p[f0 + o + lane]
+                        col_im[d + lane] = a * sin_p[f0 + o + lane]
+                load_padded(col_re, col_im, 0, lanes, buf_re, buf_im)
+                dif(buf_re, buf_im)
+                for ky in range(n_fft):
+                    o = _U((ky * n_rows + x) * lanes)
+                    d = _U(ky * lanes)
+                    for lane in range(lanes):
+                        rows_re[o + lane] = buf_re[d + lane]
+                        rows_im[o + lane] = buf_im[d + lane]
+            # x transform of every row, |.|^2 accumulated (bit-reversed ky, kx)
+            for ky in range(n_fft):
+                load_padded(rows_re, rows_im, ky * n_rows * lanes, lanes, buf_re, buf_im)
+                dif(buf_re, buf_im)
+                o = _U(ky * n_fft * lanes)
+                for i in range(n_fft * lanes):
+                    power[o + i] += buf_re[i] * buf_re[i] + buf_im[i] * buf_im[i]
+        # forward DFT of the (real) intensity: x (p < N/2 only), then y
+        for ky in range(n_fft):
+            o = _U(ky * n_fft * lanes)
+            for i in range(n_fft * lanes):
+                buf_re[i] = power[o + i]
+                buf_im[i] = 0.0
+            dit(buf_re, buf_im, True)
+            o = _U(ky * n_rows * lanes)
+            for i in range(half * lanes):
+                rows_re[o + i] = buf_re[i]
+                rows_im[o + i] = buf_im[i]
+        for p in range(half):
+            for ky in range(n_fft):
+                o = _U((ky * n_rows + p) * lanes)
+                d = _U(ky * lanes)
+                for lane in range(lanes):
+                    buf_re[d + lane] = rows_re[o + lane]
+                    buf_im[d + lane] = rows_im[o + lane]
+            dit(buf_re, buf_im, False)
+            for q in range(n_fft):
+                o = _U(c0 + (q * half + p) * 2 * lanes)
+                d = _U(q * lanes)
+                for lane in range(lanes):
+                    c[o + lane] = buf_re[d + lane]
+                for lane in range(lanes):
+                    c[o + lanes + lane] = buf_im[d + lane]
+
+    @numba.njit(nogil=True)
+    def spectra(cos_p, sin_p, amp, n_steps, n_chunks, out):  # pragma: no cover
+        """Spectra (n_chunks, N, N/2, re/im, L) of every chunk (see chunk_spectrum)."""
+        work = buffers()
+        n_amp = amp.size // block
+        for chunk in range(n_chunks):
+            chunk_spectrum(cos_p, sin_p, amp, n_steps, n_chunks, chunk, chunk % n_amp, work,
+                           out, chunk * n_fft * half * 2 * lanes)
+
+    @numba.njit(nogil=True)
+    def images(cos_p, sin_p, amp, n_steps, n_chunks, chunks_per_beacon, el, n_lanes_total,
+               up, ey, ex, scale, out):  # pragma: no cover (jit)
+        """Pixel images out (n_chunks, n_pix, n_pix, L) of every chunk (flat arrays).
+
+        Chunk ``c`` holds beacon ``c // chunks_per_beacon`` and sub-apertures
+        ``L (c % chunks_per_beacon) + lane``. The half-plane spectrum is
+        multiplied by ``scale x el[q, p, v] x up[b, q, p]`` and integrated over
+        the pixels: ``P[j, k] = Re sum_qp ey[j, q] ex[k, p] G c``. Complex
+        arrays are flat float32 with re/im planes: ``el`` (N, N/2, 2,
+        n_lanes_total), ``up`` (n_b, N, N/2, 2), ``ey`` (n_pix, 2, N),
+        ``ex`` (n_pix, 2, N/2). (One array per complex quantity keeps LLVM's
+        run-time alias checks few enough for it to vectorise.)
+        """
+        work = buffers()
+        c = np.empty(n_fft * half * 2 * lanes, np.float32)
+        v = np.empty(n_pix * 2 * lanes, np.float32)
+        image_size = n_pix * n_pix * lanes
+        for chunk in range(n_chunks):
+            amp_chunk = chunk % chunks_per_beacon
+            beacon = chunk // chunks_per_beacon
+            first = amp_chunk * lanes
+            chunk_spectrum(cos_p, sin_p, amp, n_steps, n_chunks, chunk, amp_chunk, work, c, 0)
+            image0 = _U(chunk * image_size)
+            for i in range(image_size):
+                out[image0 + i] = 0.0
+            for p in range(half):
+                for i in range(n_pix * 2 * lanes):
+                    v[i] = 0.0
+                for q in range(n_fft):
+                    u = _U(((beacon * n_fft + q) * half + p) * 2)
+                    ur = up[u] * scale
+                    ui = up[u + 1] * scale
+                    e0 = _U((q * half + p) * 2 * n_lanes_total + first)
+                    e1 = _U(e0 + n_lanes_total)
+                    c0 = _U((q * half + p) * 2 * lanes)
+                    for lane in range(lanes):
+                        er = el[e0 + lane]
+                        ei = el[e1 + lane]
+                        gr = er * ur - ei * ui
+                        gi = er * ui + ei * ur
+                        cr = c[c0 + lane]
+                        ci = c[c0 + lanes + lane]
+                        zr = cr * gr - ci * gi
+                        zi = cr * gi + ci * gr
+                        for j in range(n_pix):
+                            yr = ey[j * 2 * n_fft + q]
+                            yi = ey[(j * 2 + 1) * n_fft + q]
+                            o = _U(j * 2 * lanes + lane)
+                            v[o] += yr * zr - yi * zi
+                            v[o + lanes] += yr * zi + yi * zr
+                for j in range(n_pix):
+                    for k in range(n_pix):
+                        xr = ex[k * 2 * half + p]
+                        xi = ex[(k * 2 + 1) * half + p]
+                        o = _U(image0 + (j * n_pix + k) * lanes)
+                        s = _U(j * 2 * lanes)
+                        for lane in range(lanes):
+                            out[o + lane] += xr * v[s + lane] - xi * v[s + lanes + lane]
+
+    return SimpleNamespace(spectra=spectra, images=images, dif=dif, dit=dit)
+
+
+@numba.njit(nogil=True)
+def _gather_phase(phase, n_b, n, beacon, offset_y, offset_x, ratio, n_steps, n_chunks, n_in,
+                  out):  # pragma: no cover (jit)
+    """out[t, c, y, x, l] = ratio * phase[t, beacon[c, l], oy[c, l] + y, ox[c, l] + x] (flat)."""
+    for t in range(n_steps):
+        for c in range(n_chunks):
+            for lane in range(_LANES):
+                b = beacon[c * _LANES + lane]
+                src0 = ((t * n_b + b) * n + offset_y[c * _LANES + lane]) * n \
+                    + offset_x[c * _LANES + lane]
+                dst0 = (t * n_chunks + c) * n_in * n_in * _LANES + lane
+                for y in range(n_in):
+                    s = _U(src0 + y * n)
+                    d = _U(dst0 + y * n_in * _LANES)
+                    for x in range(n_in):
+                        out[d + _U(x * _LANES)] = ratio * phase[s + _U(x)]
+
+
+@numba.njit(nogil=True)
+def _gather_elongation(elongation, q_index, n_p, out):  # pragma: no cover (jit)
+    """out[i, p, :, v] = (re, im) elongation[v, q_index[i], p] (0 where q_index < 0,
+    p >= n_p or v padded); ``out`` (N, N/2, 2, n_lanes_total)."""
+    n_v = elongation.shape[0]
+    out[:] = 0.0
+    for i in range(q_index.size):
+        if q_index[i] < 0:
+            continue
+        for p in range(n_p):
+            for v in range(n_v):
+                z = elongation[v, q_index[i], p]
+                out[i, p, 0, v] = z.real
+                out[i, p, 1, v] = z.imag
+
+
+@dataclass(frozen=True, eq=False)
+class _LanePlan:
+    """Static lane layout of one source (downlink sub-apertures or launch apertures)."""
+
+    n_in: int
+    n_fft: int
+    tw_re: np.ndarray
+    tw_im: np.ndarray
+    beacon: np.ndarray      # (n_chunks, L) int64
+    offset_y: np.ndarray    # (n_chunks, L) int64
+    offset_x: np.ndarray    # (n_chunks, L) int64
+    amp: np.ndarray         # (n_amp, n_in, n_in, L) float32
+    chunks_per_beacon: int
+
+    @property
+    def n_chunks(self) -> int:
+        return self.beacon.shape[0]
+
+    def trig(self, phase: np.ndarray, ratio: float) -> tuple[np.ndarray, np.ndarray]:
+        """cos and sin (T, n_chunks, n_in, n_in, L) float32 of the gathered phases."""
+        n_steps, n_b, n, _ = phase.shape
+        lanes = np.empty(n_steps * self.n_chunks * self.n_in * self.n_in * _LANES,
+                         dtype=np.float32)
+        _gather_phase(phase.reshape(-1), n_b, n, self.beacon.reshape(-1),
+                      self.offset_y.reshape(-1), self.offset_x.reshape(-1), np.float32(ratio),
+                      n_steps, self.n_chunks, self.n_in, lanes)
+        return np.cos(lanes), np.sin(lanes, out=lanes)
+
+
+def _downlink_plan(wfs: ShackHartmann, n_beacons: int) -> _LanePlan:
+    n_s = wfs.samples_per_subaperture
+    n_v = wfs.n_valid
+    per_beacon = -(-n_v // _LANES)
+    v = np.arange(per_beacon * _LANES)
+    index = wfs.subaperture_index[np.minimum(v, n_v - 1)]
+    offset_y = np.tile((index[:, 0] * n_s).reshape(per_beacon, _LANES), (n_beacons, 1))
+    offset_x = np.tile((index[:, 1] * n_s).reshape(per_beacon, _LANES), (n_beacons, 1))
+    beacon = np.repeat(np.arange(n_beacons), per_beacon)[:, None] * np.ones(_LANES, np.int64)
+    amp = np.zeros((per_beacon * _LANES, n_s, n_s), dtype=np.float32)
+    amp[:n_v] = wfs.amplitude
+    amp = np.ascontiguousarray(amp.reshape(per_beacon, _LANES, n_s, n_s).transpose(0, 2, 3, 1))
+    n_fft = _next_pow2(2 * n_s)
+    return _LanePlan(n_s, n_fft, *_twiddles(n_fft), beacon.astype(np.int64),
+                     offset_y.astype(np.int64), offset_x.astype(np.int64), amp, per_beacon)
+
+
+def _uplink_plan(wfs: ShackHartmann, n_beacons: int) -> _LanePlan:
+    n_l = wfs.launch_grid.n_pix
+    n_chunks = -(-n_beacons // _LANES)
+    lanes = np.arange(n_chunks * _LANES)
+    beacon = np.where(lanes < n_beacons, lanes, 0).reshape(n_chunks, _LANES)
+    amp = np.zeros((n_chunks * _LANES, n_l, n_l), dtype=np.float32)
+    amp[:n_beacons] = wfs.launch_mask
+    amp = np.ascontiguousarray(amp.reshape(n_chunks, _LANES, n_l, n_l).transpose(0, 2, 3, 1))
+    zeros = np.zeros((n_chunks, _LANES), dtype=np.int64)
+    n_fft = _next_pow2(2 * n_l)
+    return _LanePlan(n_l, n_fft, *_twiddles(n_fft), beacon.astype(np.int64), zeros, zeros,
+                     amp, n_chunks)
+
+
+def _signed_harmonics(n_fft: int) -> np.ndarray:
+    """Integer harmonic of each natural-order DFT index (fftfreq order)."""
+    return np.fft.fftfreq(n_fft, 1.0 / n_fft).round().astype(np.int64)
+
+
+@dataclass(frozen=True, eq=False)
+class _ExposurePlan:
+    down: _LanePlan
+    up: _LanePlan
+    q_index: np.ndarray     # (N,) index of each internal harmonic on the fft_size grid, -1 if none
+    ey: np.ndarray          # (n_pix, 2, N) pixel integrals E_y (re, im) on the internal grid
+    ex: np.ndarray          # (n_pix, 2, N/2) weighted E_x
+    up_q_index: np.ndarray  # (N,) index on the uplink grid, -1 if outside
+    no_elongation: np.ndarray  # (N, N/2, 2, n_lanes) unit OTF
+
+
+def _exposure_plan(wfs: ShackHartmann, n_beacons: int) -> _ExposurePlan:
+    plans = wfs.__dict__.setdefault("_exposure_plans", {})
+    if n_beacons in plans:
+        return plans[n_beacons]
+    down = _downlink_plan(wfs, n_beacons)
+    up = _uplink_plan(wfs, n_beacons)
+    m = wfs.fft_size
+    n_fft, half = down.n_fft, down.n_fft // 2
+    q = _signed_harmonics(n_fft)
+    inside = (q > -m / 2) & (q < m / 2)
+    q_index = np.where(inside, q % m, -1)
+    e_y, e_x = wfs._pixel_integrals
+    ey = np.where(inside[None, :], e_y[:, np.where(inside, q % m, 0)], 0)
+    ex = np.zeros((wfs.n_pixels, half), dtype=np.complex64)
+    n_p = min(half, m // 2 + 1)
+    ex[:, :n_p] = e_x[:, :n_p]
+    qu = np.where(np.abs(q) < up.n_fft // 2, q % up.n_fft, -1)
+    n_lanes = down.chunks_per_beacon * _LANES
+    no_elongation = np.zeros((n_fft, half, 2, n_lanes), np.float32)
+    no_elongation[:, :, 0] = 1.0
+    plan = _ExposurePlan(
+        down, up, q_index.astype(np.int64),
+        np.ascontiguousarray(np.stack([ey.real, ey.imag], axis=1), dtype=np.float32),
+        np.ascontiguousarray(np.stack([ex.real, ex.imag], axis=1), dtype=np.float32),
+        qu.astype(np.int64), no_elongation)
+    plans[n_beacons] = plan
+    return plan
+
+
+def _exposure_uplink_otf(wfs: ShackHartmann, plan: _ExposurePlan, uplink: np.ndarray,
+                         ratio: float) -> np.ndarray:
+    """Exposure-mean uplink OTF (n_beacons, N, N/2, 2) [re, im] on the downlink harmonics.
+
+    The steps' spots are summed before the transform and the sum normalised
+    to unit flux: the mean of the steps' unit-flux OTFs, since every step's
+    spot has the same flux (Parseval, phase-only changes).
+    """
+    n_b = uplink.shape[1]
+    up = plan.up
+    cos_p, sin_p = up.trig(uplink, ratio)
+    spec = np.empty((up.n_chunks, up.n_fft, up.n_fft // 2, 2, _LANES), np.float32)
+    _lane_kernels(up.n_fft, up.n_in).spectra(cos_p, sin_p, up.amp.reshape(-1), uplink.shape[0],
+                                             up.n_chunks, spec.reshape(-1))
+    spec = spec.transpose(0, 4, 1, 2, 3).reshape(-1, up.n_fft, up.n_fft // 2, 2)[:n_b]
+    spec = spec / spec[:, :1, :1, :1]
+    n_fft, half = plan.down.n_fft, plan.down.n_fft // 2
+    otf = np.zeros((n_b, n_fft, half, 2), dtype=np.float32)
+    n_p = min(half, up.n_fft // 2)
+    rows = plan.up_q_index >= 0
+    otf[:, rows, :n_p] = spec[:, plan.up_q_index[rows], :n_p]
+    return otf
+
+
 def exposure_images(wfs: ShackHartmann, downlink_phase_rad: np.ndarray,
                     phase_wavelength_m: float, elongation: np.ndarray | None = None,
                     uplink_phase_rad: np.ndarray | None = None) -> np.ndarray:
@@ -347,7 +798,54 @@ def exposure_images(wfs: ShackHartmann, downlink_phase_rad: np.ndarray,
     up- and down-link, a second-order effect), then pixel-integrated.
     Returns (n_beacons, n_valid, n_pixels, n_pixels) float32 in units of a
     full sub-aperture's flux over the exposure.
+
+    Same result (to float32 rounding) as :func:`reference_exposure_images`,
+    which chains :func:`intensity_samples`, :func:`intensity_spectra`,
+    :func:`uplink_otf` and :func:`pixel_images`; here all steps, beacons and
+    sub-apertures go through one fused, SIMD-vectorised kernel (see
+    ``_lane_kernels``): the steps' intensities are summed before their single
+    spectrum, the spot OTFs multiply only the half-plane harmonics that the
+    field's autocorrelation can reach, and the pixel integration is done on
+    the fly.
     """
+    downlink = np.ascontiguousarray(downlink_phase_rad, dtype=np.float32)
+    if downlink.ndim != 4:
+        raise ValueError("downlink phase must be (T, n_beacons, n, n)")
+    n_steps, n_beacons = downlink.shape[:2]
+    plan = _exposure_plan(wfs, n_beacons)
+    down = plan.down
+    n_fft, half = down.n_fft, down.n_fft // 2
+    ratio = phase_wavelength_m / wfs.wavelength_m
+    cos_p, sin_p = down.trig(downlink, ratio)
+    if elongation is None:
+        el = plan.no_elongation
+    else:
+        el = np.empty_like(plan.no_elongation)
+        _gather_elongation(np.ascontiguousarray(elongation, dtype=np.complex64), plan.q_index,
+                           min(half, wfs.fft_size // 2 + 1), el)
+    if uplink_phase_rad is None:
+        up = np.zeros((n_beacons, n_fft, half, 2), np.float32)
+        up[..., 0] = 1.0
+    else:
+        uplink = np.ascontiguousarray(uplink_phase_rad, dtype=np.float32)
+        if uplink.ndim != 4:
+            raise ValueError("uplink phase must be (T, n_beacons, n_l, n_l)")
+        up = _exposure_uplink_otf(wfs, plan, uplink, ratio)
+    scale = np.float32(1.0 / (n_fft**2 * wfs.samples_per_subaperture**2 * n_steps))
+    lanes = np.empty((down.n_chunks, wfs.n_pixels, wfs.n_pixels, _LANES), dtype=np.float32)
+    _lane_kernels(n_fft, down.n_in, wfs.n_pixels).images(
+        cos_p, sin_p, down.amp.reshape(-1), n_steps, down.n_chunks, down.chunks_per_beacon,
+        el.reshape(-1), el.shape[-1], up.reshape(-1), plan.ey.reshape(-1), plan.ex.reshape(-1),
+        scale, lanes.reshape(-1))
+    p = wfs.n_pixels
+    images = lanes.reshape(n_beacons, -1, p, p, _LANES).transpose(0, 1, 4, 2, 3)
+    return np.ascontiguousarray(images.reshape(n_beacons, -1, p, p)[:, :wfs.n_valid])
+
+
+def reference_exposure_images(wfs: ShackHartmann, downlink_phase_rad: np.ndarray,
+                              phase_wavelength_m: float, elongation: np.ndarray | None = None,
+                              uplink_phase_rad: np.ndarray | None = None) -> np.ndarray:
+    """:func:`exposure_images` by the step-by-step public functions (slow, for tests)."""
     downlink = np.asarray(downlink_phase_rad)
     if downlink.ndim != 4:
         raise ValueError("downlink phase must be (T, n_beacons, n, n)")

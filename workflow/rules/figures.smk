@@ -1,16 +1,30 @@
 rule figure:
     """One figure and the tidy dataset it is drawn from."""
     input:
-        lucky=lambda w: [f"results/cases/{c}/lucky.nc" for c in STUDY["figures"][w.fig]["cases"]],
+        lucky=lambda w: figure_inputs(w.fig),
         code=src("figures", "analytic"),
     output:
         pdf="figures/{fig}.pdf",
         png="figures/{fig}.png",
         data="figures/{fig}.nc",
     params:
-        settings=lambda w: canonical_json(STUDY["figures"][w.fig]),
+        settings=lambda w: canonical_json(figure_settings(w.fig)),
     log:
         "logs/figures/{fig}.log",
     shell:
         "{LUCKYAO} figure --id {wildcards.fig:q} --settings {params.settings:q}"
         " --out-prefix figures/{wildcards.fig} {input.lucky} 2> {log}"
+
+
+def figure_settings(fig):
+    """The figure's config, its cases' resolved configs and the seed."""
+    figure = STUDY["figures"][fig]
+    return {**figure, "seed": STUDY["seed"], "case_configs": {c: CASES[c] for c in figure["cases"]}}
+
+
+def figure_inputs(fig):
+    """The cases' lucky datasets; none for the geometry-only asterism figure."""
+    figure = STUDY["figures"][fig]
+    if figure["kind"] == "asterism":
+        return []
+    return [f"results/cases/{c}/lucky.nc" for c in figure["cases"]]

@@ -3,7 +3,8 @@ rule simulate:
     input:
         screens=lambda w: f"results/turbulence/{turbulence_key(TURBULENCE[w.case])}.npy",
         screens_metadata=lambda w: f"results/turbulence/{turbulence_key(TURBULENCE[w.case])}.nc",
-        code=src("propagation", "pupil", "imaging", "simulate", "datasets"),
+        reconstructor=lambda w: reconstructor_file(w.case),
+        code=src("propagation", "pupil", "imaging", "simulate", "sensing", "lgs", "wfs", "tomography", "datasets"),
     output:
         frames=frames_output("results/cases/{case}/frames.nc"),
         telemetry="results/cases/{case}/telemetry.nc",
@@ -17,4 +18,5 @@ rule simulate:
     shell:
         "{LUCKYAO} simulate --case {params.case:q} --name {wildcards.case:q} --seed {params.seed}"
         " --screens {input.screens} --screens-metadata {input.screens_metadata}"
+        " --reconstructor '{input.reconstructor}'"
         " --frames {output.frames} --telemetry {output.telemetry} 2> {log}"

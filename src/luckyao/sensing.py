@@ -1,0 +1,76 @@
+"""The LGS measurement chain of the time loop: turbulence -> slopes -> ``lgs_rms``.
+
+Per time step the downlink phase of every beacon (cone effect) is sampled on
+the WFS pupil grid and the uplink phase on the launch aperture (the upward
+beam's cone, anchored on the launch position). Every ``exposure_steps`` steps
+the WFS exposure gives tilt-removed slopes, and each target's reconstructor
+gives the tilt-removed rms of the reconstructed wavefront along it.
+
+A 10 ms lucky frame spans ``steps_per_frame / exposure_steps`` WFS exposures
+(2 of 5 ms by default); its ``lgs_rms`` is ``sqrt(mean(rms^2))`` over them
+(``tomography.lucky_frame_rms_nm``).
+"""
+
+import numpy as np
+
+from .atmosphere import Layer
+from .propagation import LineOfSight, Propagator, ScreenSet
+from .pupil import Telescope
+from .reconstructor import lgs_config, shack_hartmann
+from .tomography import lgs_rms_nm
+from .units import REFERENCE_WAVELENGTH_M
+from .wfs import lgs_elongation_otf, measure_slopes
+
+
+class LgsSensing:
+    """Beacons, WFS and per-target reconstructors of one case."""
+
+    def __init__(self, case: dict, layers: list[Layer], screens: ScreenSet, reconstructors: np.ndarray,
+                 seed: int):
+        telescope = Telescope(case["telescope"]["diameter_m"], case["telescope"]["obscuration_m"])
+        self.lgs = lgs_config(case["lgs"])
+        self.wfs = shack_hartmann(telescope, self.lgs, case["wfs"])
+        self.exposure_steps = case["wfs"]["exposure_steps"]
+        self.photons = case["wfs"]["photons_per_subaperture"]
+        self.read_noise_e = case["wfs"]["read_noise_e"]
+        self.rng = np.random.default_rng([seed, 1])
+        self.reconstructors = np.asarray(reconstructors, dtype=np.float32)
+        if self.reconstructors.shape[-1] != 2 * self.lgs.n_beacons * self.wfs.n_valid:
+            raise ValueError("the reconstructor does not match this WFS: rebuild it")
+        height = self.lgs.height_m
+        directions = self.lgs.directions_rad
+        launch = self.lgs.launch_xy_m
+        self._down = Propagator(layers, screens, [LineOfSight(tx, ty, height) for tx, ty in directions],
+                                self.wfs.grid, mask=self.wfs.mask)
+        # uplink cone anchored on the launch point o: o + (p - o) s + theta h
+        # = s p + (theta + o / H) h for launch-grid points p = o + g
+        up_los = [LineOfSight(tx + launch[0] / height, ty + launch[1] / height, height) for tx, ty in directions]
+        self._up = Propagator(layers, screens, up_los, self.wfs.launch_grid, centre_xy_m=tuple(launch))
+        self.elongation = lgs_elongation_otf(self.wfs, self.lgs)
+        n_b, n, n_launch = len(directions), self.wfs.grid.n_pix, self.wfs.launch_grid.n_pix
+        self._down_buffer = np.zeros((self.exposure_steps, n_b, n, n), dtype=np.float32)
+        self._up_buffer = np.zeros((self.exposure_steps, n_b, n_launch, n_launch), dtype=np.float32)
+        self.n_steps_max = min(self._down.n_steps_max, self._up.n_steps_max)
+
+    def sample(self, step: int, layer_scale) -> bool:
+        """Sample the beacons' down- and uplink phases at ``step`` into the exposure;
+        True when that completes the exposure."""
+        k = step % self.exposure_steps
+        self._down_buffer[k] = self._down.sample(step, layer_scale)
+        self._up_buffer[k] = self._up.sample(step, layer_scale)
+        return k == self.exposure_steps - 1
+
+    def slopes(self) -> np.ndarray:
+        """Tilt-removed slopes (n_beacons, 2, n_valid) [rad] of the completed exposure."""
+        return measure_slopes(self.wfs, self._down_buffer, REFERENCE_WAVELENGTH_M, self.elongation,
+                              self._up_buffer, self.photons, self.read_noise_e,
+                              self.rng if self.photons is not None else None)
+
+    def rms_nm(self, slopes: np.ndarray) -> np.ndarray:
+        """Each target's reconstructed tilt-removed rms [nm] (n_targets,)."""
+        return np.array([lgs_rms_nm(r, slopes) for r in self.reconstructors])
+
+    def step(self, step: int, layer_scale) -> np.ndarray | None:
+        """Sample the beacons at ``step``; at an exposure's last step return each
+        target's reconstructed tilt-removed rms [nm] (n_targets,), else None."""
+        return self.rms_nm(self.slopes()) if self.sample(step, layer_scale) else None
