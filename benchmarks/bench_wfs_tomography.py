@@ -81,6 +81,25 @@ def per_step() -> None:
     print(f"WFS 4 LGS x 8x8 ({wfs.n_valid} valid, n_s={wfs.samples_per_subaperture}, "
           f"M={wfs.fft_size}): {t_wfs:.2f} ms per 5 ms exposure (images {t_images:.2f}) "
           f"= {t_wfs / 2:.2f} ms per 2.5 ms step")
+    # sub-stages of exposure_images (private helpers; ms per 2.5 ms step)
+    plan = sh._exposure_plan(wfs, lgs.n_beacons)
+    down = plan.down
+    ratio = 500e-9 / wfs.wavelength_m
+    cos_p, sin_p = down.trig(downlink, ratio)
+    kernel = sh._lane_kernels(down.n_fft, down.n_in, down.lanes)
+    half = down.n_fft // 2
+    out = np.empty(down.n_fft * down.n_chunks * half * down.lanes, np.complex64)
+    spot = np.ones(lgs.n_beacons * down.n_fft * half, np.complex64)
+    t_trig = best_ms(lambda: down.trig(downlink, ratio))
+    t_up = best_ms(lambda: sh._exposure_uplink_otf(wfs, plan, uplink, ratio))
+    t_fft = best_ms(lambda: kernel.spectra(cos_p, sin_p, down.amp.reshape(-1), 2, down.n_chunks,
+                                           plan.no_elongation.reshape(-1), spot, out))
+    images = sh.exposure_images(wfs, downlink, 500e-9, elongation, uplink)
+    t_cog = best_ms(lambda: sh.remove_tip_tilt(sh.centroids_rad(wfs, images)), number=200)
+    t_rest = t_wfs - t_trig - t_up - t_fft - t_cog
+    print(f"  per step: phase gather + cos/sin {t_trig / 2:.3f}, uplink OTF {t_up / 2:.3f}, "
+          f"downlink FFTs + |.|^2 + spectrum x OTF {t_fft / 2:.3f}, centroids {t_cog / 2:.3f}, "
+          f"pixel integration + rest {t_rest / 2:.3f} ms")
     print(f"reconstruction + rms ({rec.shape[0]} points x {rec.shape[1]} slopes): "
           f"{t_rec:.3f} ms per exposure = {t_rec / 2:.3f} ms per step")
     print(f"WFS + reconstruction: {(t_wfs + t_rec) / 2:.2f} ms per step")

@@ -12,8 +12,6 @@ the optical axis on pixel ``(n/2, n/2)``; detector noise (:mod:`luckyao.detector
 is applied here, so one simulated cube serves every detector model.
 """
 
-import logging
-import time
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass
 
@@ -22,8 +20,8 @@ import xarray as xr
 
 from .detector import Detector, apply_detector
 from .metrics import EncircledEnergy, centroid_px, fwhm_arcsec, strehl
+from .progress import Progress
 
-log = logging.getLogger(__name__)
 
 IMAGE_CRITERIA = (("strehl", True), ("d50", False))
 """Image criteria computed per frame: (name, larger_is_better)."""
@@ -120,24 +118,6 @@ def shift_and_add(frames: np.ndarray) -> np.ndarray:
     return shift_frames(frames, shifts).sum(axis=0, dtype=np.float64)
 
 
-class _Progress:
-    """Logs done/total, rate and ETA at most every ``interval_s`` seconds."""
-
-    def __init__(self, what: str, total: int, interval_s: float):
-        self.what, self.total, self.interval_s = what, total, interval_s
-        self.start = self.last = time.monotonic()
-
-    def update(self, done: int) -> None:
-        now = time.monotonic()
-        if now - self.last < self.interval_s and done < self.total:
-            return
-        self.last = now
-        rate = done / max(now - self.start, 1e-9)
-        eta = (self.total - done) / rate if rate > 0 else float("inf")
-        log.info("%s: %d/%d frames, %.1f frames/s, ETA %.0f s", self.what, done, self.total,
-                 rate, eta)
-
-
 def _noisy(frames: np.ndarray, detector: Detector, seed: int, i_detector: int,
            start: int) -> np.ndarray:
     """Detector frames of one chunk; the rng is ``default_rng([seed, i_detector, start])``."""
@@ -223,7 +203,7 @@ def run_lucky(iter_chunks: Callable[[], Iterable[tuple[int, np.ndarray]]], n_fra
     frame_centroid = np.full((n_det, n_frames, 2), np.nan)
     frame_flux = np.full((n_det, n_frames), np.nan)
     encircled = long_none = long_cog = None
-    progress = _Progress("lucky pass 1/2", n_frames, progress_interval_s)
+    progress = Progress("lucky pass 1/2: frames", n_frames, progress_interval_s)
     for start, frames in _chunks(iter_chunks, n_frames):
         n = frames.shape[-1]
         if encircled is None:
@@ -258,7 +238,7 @@ def run_lucky(iter_chunks: Callable[[], Iterable[tuple[int, np.ndarray]]], n_fra
     # pass 2: same noise, recentre, accumulate into (criterion, bin) partial sums
     partial = np.zeros((n_det, n_crit * n_bins, n * n))
     rows = np.arange(n_crit)[:, None] * n_bins  # row offset of each criterion
-    progress = _Progress("lucky pass 2/2", n_frames, progress_interval_s)
+    progress = Progress("lucky pass 2/2: frames", n_frames, progress_interval_s)
     for start, frames in _chunks(iter_chunks, n_frames):
         k = len(frames)
         sl = slice(start, start + k)

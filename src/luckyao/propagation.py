@@ -37,11 +37,11 @@ def footprint_m(points_x_m, points_y_m, layer_height_m, los: LineOfSight):
 @numba.njit(cache=True, fastmath=True, nogil=True)
 def _sample_kernel(screens, starts, strides, shifts, affine, row_start, row_end, layer_scale,
                    out):  # pragma: no cover (jit)
-    """out[d, y, x] = sum_l scale[l] * bilinear(screen_l at the grid point's footprint),
+    """out[d, y, x] = sum_l scale[i_layer] * bilinear(screen_l at the grid point's footprint),
     for ``row_start[y] <= x < row_end[y]`` (zero elsewhere).
 
     ``affine[d, l]`` = (along0, across0, d_along/dx, d_across/dx, d_along/dy,
-    d_across/dy) in screen samples at t = 0; ``shifts[l]`` the frozen-flow shift
+    d_across/dy) in screen samples at t = 0; ``shifts[i_layer]`` the frozen-flow shift
     [samples along the wind] now. Per row, a first loop computes taps and
     weights (vectorisable), a second gathers and blends.
     """
@@ -51,12 +51,12 @@ def _sample_kernel(screens, starts, strides, shifts, affine, row_start, row_end,
     w_across = np.empty(n_x, np.float32)
     out[:] = 0.0
     for d in range(n_dir):
-        for l in range(starts.shape[0]):
-            origin = starts[l]
-            stride = strides[l]
-            scale = np.float32(layer_scale[l])
-            a0 = affine[d, l, 0] - shifts[l]
-            c0, a_x, c_x, a_y, c_y = affine[d, l, 1], affine[d, l, 2], affine[d, l, 3], affine[d, l, 4], affine[d, l, 5]
+        for i_layer in range(starts.shape[0]):
+            origin = starts[i_layer]
+            stride = strides[i_layer]
+            scale = np.float32(layer_scale[i_layer])
+            a0 = affine[d, i_layer, 0] - shifts[i_layer]
+            c0, a_x, c_x, a_y, c_y = affine[d, i_layer, 1], affine[d, i_layer, 2], affine[d, i_layer, 3], affine[d, i_layer, 4], affine[d, i_layer, 5]
             for y in range(n_y):
                 row_a = a0 + y * a_y
                 row_c = c0 + y * c_y
@@ -128,19 +128,19 @@ class Propagator:
         corners_x = centre_xy_m[0] + np.array([c[0], c[-1], c[0], c[-1]])
         corners_y = centre_xy_m[1] + np.array([c[0], c[0], c[-1], c[-1]])
         for d, los in enumerate(lines_of_sight):
-            for l, (layer, spec) in enumerate(zip(layers, specs)):
+            for i_layer, (layer, spec) in enumerate(zip(layers, specs)):
                 origin = _screen_position(*footprint_m(corners_x[0], corners_y[0], layer.height_m, los), layer, spec)
                 step_x = _screen_position(*footprint_m(corners_x[0] + grid.dx_m, corners_y[0], layer.height_m, los),
                                           layer, spec) - origin
                 step_y = _screen_position(*footprint_m(corners_x[0], corners_y[0] + grid.dx_m, layer.height_m, los),
                                           layer, spec) - origin
-                self._affine[d, l] = [origin[0], origin[1], step_x[0], step_x[1], step_y[0], step_y[1]]
+                self._affine[d, i_layer] = [origin[0], origin[1], step_x[0], step_x[1], step_y[0], step_y[1]]
                 along, across = _screen_position(*footprint_m(corners_x, corners_y, layer.height_m, los), layer, spec)
                 if (along.min() < 0 or along.max() + 1 >= spec.n_along or across.min() < 0
                         or across.max() + 1 >= spec.n_across):
                     raise ValueError(f"footprint at height {layer.height_m} m leaves its screen: "
                                      "raise turbulence.field_radius_arcsec or shorten the case")
-                first_row[l] = min(first_row[l], along.min())
+                first_row[i_layer] = min(first_row[i_layer], along.min())
         moving = self._shift > 0
         self.n_steps_max = int(np.min(np.floor(first_row[moving] / self._shift[moving])) + 1) if moving.any() else 2**62
         """Steps for which every footprint stays on its screen."""

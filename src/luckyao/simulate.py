@@ -6,8 +6,6 @@ wavelength) is added to the frame; the tilt-removed rms of the phase is the
 per-frame truth. A frame is the mean of its steps' unit-flux images.
 """
 
-import logging
-import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -16,12 +14,10 @@ import xarray as xr
 from .atmosphere import Layer, R0Schedule
 from .imaging import Camera, Imager
 from .propagation import LineOfSight, Propagator, ScreenSet
+from .progress import Progress
 from .pupil import Telescope, TiltRemover
 from .sensing import LgsSensing
 from .units import ARCSEC_RAD, REFERENCE_WAVELENGTH_M, phase_rad_to_nm
-
-log = logging.getLogger(__name__)
-
 
 @dataclass(frozen=True)
 class System:
@@ -61,24 +57,6 @@ class System:
         return r0 ** (-5 / 6) * np.sqrt([layer.cn2_fraction for layer in self.layers])
 
 
-class Progress:
-    """Logs done/total, rate and ETA at most every ``every_s`` seconds."""
-
-    def __init__(self, total: int, what: str, every_s: float = 10.0):
-        self.total, self.what, self.every_s = total, what, every_s
-        self.start = self.last = time.perf_counter()
-
-    def update(self, done: int) -> None:
-        now = time.perf_counter()
-        if now - self.last < self.every_s and done < self.total:
-            return
-        self.last = now
-        rate = done / max(now - self.start, 1e-9)
-        eta = (self.total - done) / rate if rate > 0 else float("inf")
-        log.info("%s %d/%d (%.1f%%), %.1f/s, ETA %.0f s", self.what, done, self.total,
-                 100 * done / self.total, rate, eta)
-
-
 def simulate(system: System, screens: ScreenSet, write_frames, sensing: LgsSensing | None = None,
              block_frames: int = 32) -> xr.Dataset:
     """Run the case; ``write_frames(start, frames (target, k, n, n))`` receives the
@@ -105,7 +83,7 @@ def simulate(system: System, screens: ScreenSet, write_frames, sensing: LgsSensi
     r0_frame = np.empty(n_frames)
     axis_strehl = np.empty((n_targets, n_frames), dtype=np.float32)
     lgs_rms = np.full((n_targets, n_frames), np.nan, dtype=np.float32)
-    progress = Progress(n_frames, "frames")
+    progress = Progress("frames", n_frames)
     buffer = np.empty((n_targets, block_frames, n_pix, n_pix), dtype=np.float32)
     for start in range(0, n_frames, block_frames):
         count = min(block_frames, n_frames - start)

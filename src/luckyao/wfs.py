@@ -331,9 +331,10 @@ def pixel_images(wfs: ShackHartmann, spectra: np.ndarray) -> np.ndarray:
 
 
 # --- fused exposure kernel ------------------------------------------------------
-# Sub-apertures (and launch apertures) are processed in "lanes": blocks of
-# _LANES of them are stored innermost (..., _LANES) so that every FFT butterfly,
-# power accumulation and pixel integration is one SIMD loop over the lanes.
+# Sub-apertures are processed in "lanes": blocks of _LANES of them (one beacon
+# each) are stored innermost (..., _LANES) so that every FFT butterfly, power
+# accumulation and OTF product is one SIMD loop over the lanes; the pixel
+# integration is then two complex matrix products (BLAS) for all of them.
 # The 2-D transforms are radix-2 on N = 2^k >= 2 n_in samples (N may differ
 # from ``fft_size``: the Fourier coefficients of the intensity are those of
 # the autocorrelation of the field, independent of the padding as long as
@@ -342,6 +343,8 @@ def pixel_images(wfs: ShackHartmann, spectra: np.ndarray) -> np.ndarray:
 # in, natural out), so no bit reversal is ever done; the zero-padded half of
 # the field is pruned (the first DIF stage is a copy and a twiddle), and only
 # the p = 0..N/2-1 half-plane of the intensity spectrum is computed.
+# 48 lanes: long enough SIMD loops (16 were ~2x slower) and no padding for the
+# 8x8 WFS (48 valid sub-apertures).
 _LANES = 48
 
 
@@ -362,14 +365,13 @@ _U = numba.uint64
 
 
 @lru_cache(maxsize=None)
-def _lane_kernels(n_fft: int, n_in: int, n_pix: int = 0) -> SimpleNamespace:
+def _lane_kernels(n_fft: int, n_in: int, lanes: int) -> SimpleNamespace:
     """JIT kernels for transforms of ``n_fft`` (power of 2) samples of ``n_in``
-    inputs, images of ``n_pix`` x ``n_pix`` pixels."""
+    inputs, ``lanes`` sub-apertures at a time."""
     half = n_fft // 2
     n_rows = max(n_in, half)
-    block = n_in * n_in * _LANES
+    block = n_in * n_in * lanes
     tw_re, tw_im = _twiddles(n_fft)
-    lanes = _LANES
     assert n_in <= half and n_fft >= 4
 
     @numba.njit(nogil=True, inline="always")
@@ -482,13 +484,17 @@ def _lane_kernels(n_fft: int, n_in: int, n_pix: int = 0) -> SimpleNamespace:
 
     @numba.njit(nogil=True)
     def chunk_spectrum(cos_p, sin_p, amp, n_steps, n_chunks, chunk, amp_chunk, work,
-                       c, c0):  # pragma: no cover (jit)
-        """Half-plane spectrum c[c0:] (N, N/2, re/im, L) of sum_t |FFT(amp exp(i phi_t))|^2.
+                       otf, otf_chunk, spot, beacon, c):  # pragma: no cover (jit)
+        """Half-plane spectrum of sum_t |FFT(amp exp(i phi_t))|^2 times the spot OTF.
 
         Flat inputs: ``cos_p``/``sin_p`` (T, n_chunks, n_in, n_in, L) [y, x],
-        ``amp`` (n_amp, n_in, n_in, L); unnormalised: c = N^2 x autocorrelation.
+        ``amp`` (n_amp, n_in, n_in, L). Writes
+        ``c[q, chunk, p, lane] = C[q, p, lane] otf[q, otf_chunk, p, lane] spot[beacon, q, p]``
+        (complex64, c (N, n_chunks, N/2, L), otf (N, n_otf, N/2, L), spot
+        (n_b, N, N/2)) with C = N^2 x the autocorrelation of the field.
         """
         col_re, col_im, buf_re, buf_im, rows_re, rows_im, power = work
+        n_otf = otf.size // (n_fft * half * lanes)
         for i in range(n_fft * n_fft * lanes):
             power[i] = 0.0
         a0 = _U(amp_chunk * block)
@@ -538,117 +544,57 @@ def _lane_kernels(n_fft: int, n_in: int, n_pix: int = 0) -> SimpleNamespace:
                     buf_im[d + lane] = rows_im[o + lane]
             dit(buf_re, buf_im, False)
             for q in range(n_fft):
-                o = _U(c0 + (q * half + p) * 2 * lanes)
+                o = _U(((q * n_chunks + chunk) * half + p) * lanes)
+                g = _U(((q * n_otf + otf_chunk) * half + p) * lanes)
+                s = spot[(beacon * n_fft + q) * half + p]
                 d = _U(q * lanes)
                 for lane in range(lanes):
-                    c[o + lane] = buf_re[d + lane]
-                for lane in range(lanes):
-                    c[o + lanes + lane] = buf_im[d + lane]
+                    c[o + lane] = complex(buf_re[d + lane], buf_im[d + lane]) * (otf[g + lane] * s)
 
     @numba.njit(nogil=True)
-    def spectra(cos_p, sin_p, amp, n_steps, n_chunks, out):  # pragma: no cover
-        """Spectra (n_chunks, N, N/2, re/im, L) of every chunk (see chunk_spectrum)."""
+    def spectra(cos_p, sin_p, amp, n_steps, n_chunks, otf, spot, out):  # pragma: no cover
+        """Spectra x OTFs (N, n_chunks, N/2, L) complex64 of every chunk (see
+        chunk_spectrum); chunk ``c`` uses amplitude and ``otf`` block ``c % n_amp``
+        and the ``spot`` of beacon ``c // n_amp``."""
         work = buffers()
         n_amp = amp.size // block
         for chunk in range(n_chunks):
             chunk_spectrum(cos_p, sin_p, amp, n_steps, n_chunks, chunk, chunk % n_amp, work,
-                           out, chunk * n_fft * half * 2 * lanes)
+                           otf, chunk % n_amp, spot, chunk // n_amp, out)
 
-    @numba.njit(nogil=True)
-    def images(cos_p, sin_p, amp, n_steps, n_chunks, chunks_per_beacon, el, n_lanes_total,
-               up, ey, ex, scale, out):  # pragma: no cover (jit)
-        """Pixel images out (n_chunks, n_pix, n_pix, L) of every chunk (flat arrays).
-
-        Chunk ``c`` holds beacon ``c // chunks_per_beacon`` and sub-apertures
-        ``L (c % chunks_per_beacon) + lane``. The half-plane spectrum is
-        multiplied by ``scale x el[q, p, v] x up[b, q, p]`` and integrated over
-        the pixels: ``P[j, k] = Re sum_qp ey[j, q] ex[k, p] G c``. Complex
-        arrays are flat float32 with re/im planes: ``el`` (N, N/2, 2,
-        n_lanes_total), ``up`` (n_b, N, N/2, 2), ``ey`` (n_pix, 2, N),
-        ``ex`` (n_pix, 2, N/2). (One array per complex quantity keeps LLVM's
-        run-time alias checks few enough for it to vectorise.)
-        """
-        work = buffers()
-        c = np.empty(n_fft * half * 2 * lanes, np.float32)
-        v = np.empty(n_pix * 2 * lanes, np.float32)
-        image_size = n_pix * n_pix * lanes
-        for chunk in range(n_chunks):
-            amp_chunk = chunk % chunks_per_beacon
-            beacon = chunk // chunks_per_beacon
-            first = amp_chunk * lanes
-            chunk_spectrum(cos_p, sin_p, amp, n_steps, n_chunks, chunk, amp_chunk, work, c, 0)
-            image0 = _U(chunk * image_size)
-            for i in range(image_size):
-                out[image0 + i] = 0.0
-            for p in range(half):
-                for i in range(n_pix * 2 * lanes):
-                    v[i] = 0.0
-                for q in range(n_fft):
-                    u = _U(((beacon * n_fft + q) * half + p) * 2)
-                    ur = up[u] * scale
-                    ui = up[u + 1] * scale
-                    e0 = _U((q * half + p) * 2 * n_lanes_total + first)
-                    e1 = _U(e0 + n_lanes_total)
-                    c0 = _U((q * half + p) * 2 * lanes)
-                    for lane in range(lanes):
-                        er = el[e0 + lane]
-                        ei = el[e1 + lane]
-                        gr = er * ur - ei * ui
-                        gi = er * ui + ei * ur
-                        cr = c[c0 + lane]
-                        ci = c[c0 + lanes + lane]
-                        zr = cr * gr - ci * gi
-                        zi = cr * gi + ci * gr
-                        for j in range(n_pix):
-                            yr = ey[j * 2 * n_fft + q]
-                            yi = ey[(j * 2 + 1) * n_fft + q]
-                            o = _U(j * 2 * lanes + lane)
-                            v[o] += yr * zr - yi * zi
-                            v[o + lanes] += yr * zi + yi * zr
-                for j in range(n_pix):
-                    for k in range(n_pix):
-                        xr = ex[k * 2 * half + p]
-                        xi = ex[(k * 2 + 1) * half + p]
-                        o = _U(image0 + (j * n_pix + k) * lanes)
-                        s = _U(j * 2 * lanes)
-                        for lane in range(lanes):
-                            out[o + lane] += xr * v[s + lane] - xi * v[s + lanes + lane]
-
-    return SimpleNamespace(spectra=spectra, images=images, dif=dif, dit=dit)
+    return SimpleNamespace(spectra=spectra)
 
 
 @numba.njit(nogil=True)
 def _gather_phase(phase, n_b, n, beacon, offset_y, offset_x, ratio, n_steps, n_chunks, n_in,
-                  out):  # pragma: no cover (jit)
+                  lanes, out):  # pragma: no cover (jit)
     """out[t, c, y, x, l] = ratio * phase[t, beacon[c, l], oy[c, l] + y, ox[c, l] + x] (flat)."""
     for t in range(n_steps):
         for c in range(n_chunks):
-            for lane in range(_LANES):
-                b = beacon[c * _LANES + lane]
-                src0 = ((t * n_b + b) * n + offset_y[c * _LANES + lane]) * n \
-                    + offset_x[c * _LANES + lane]
-                dst0 = (t * n_chunks + c) * n_in * n_in * _LANES + lane
+            for lane in range(lanes):
+                b = beacon[c * lanes + lane]
+                src0 = ((t * n_b + b) * n + offset_y[c * lanes + lane]) * n \
+                    + offset_x[c * lanes + lane]
+                dst0 = (t * n_chunks + c) * n_in * n_in * lanes + lane
                 for y in range(n_in):
                     s = _U(src0 + y * n)
-                    d = _U(dst0 + y * n_in * _LANES)
+                    d = _U(dst0 + y * n_in * lanes)
                     for x in range(n_in):
-                        out[d + _U(x * _LANES)] = ratio * phase[s + _U(x)]
+                        out[d + _U(x * lanes)] = ratio * phase[s + _U(x)]
 
 
 @numba.njit(nogil=True)
 def _gather_elongation(elongation, q_index, n_p, out):  # pragma: no cover (jit)
-    """out[i, p, :, v] = (re, im) elongation[v, q_index[i], p] (0 where q_index < 0,
-    p >= n_p or v padded); ``out`` (N, N/2, 2, n_lanes_total)."""
+    """out[i, v // L, p, v % L] = elongation[v, q_index[i], p] (0 where q_index < 0,
+    p >= n_p or v padded); ``out`` (N, chunks_per_beacon, N/2, L) complex64."""
     n_v = elongation.shape[0]
+    lanes = out.shape[3]
     out[:] = 0.0
-    for i in range(q_index.size):
-        if q_index[i] < 0:
-            continue
-        for p in range(n_p):
-            for v in range(n_v):
-                z = elongation[v, q_index[i], p]
-                out[i, p, 0, v] = z.real
-                out[i, p, 1, v] = z.imag
+    for v in range(n_v):
+        for i in range(q_index.size):
+            if q_index[i] >= 0:
+                for p in range(n_p):
+                    out[i, v // lanes, p, v % lanes] = elongation[v, q_index[i], p]
 
 
 @dataclass(frozen=True, eq=False)
@@ -657,8 +603,7 @@ class _LanePlan:
 
     n_in: int
     n_fft: int
-    tw_re: np.ndarray
-    tw_im: np.ndarray
+    lanes: int
     beacon: np.ndarray      # (n_chunks, L) int64
     offset_y: np.ndarray    # (n_chunks, L) int64
     offset_x: np.ndarray    # (n_chunks, L) int64
@@ -672,43 +617,30 @@ class _LanePlan:
     def trig(self, phase: np.ndarray, ratio: float) -> tuple[np.ndarray, np.ndarray]:
         """cos and sin (T, n_chunks, n_in, n_in, L) float32 of the gathered phases."""
         n_steps, n_b, n, _ = phase.shape
-        lanes = np.empty(n_steps * self.n_chunks * self.n_in * self.n_in * _LANES,
+        lanes = np.empty(n_steps * self.n_chunks * self.n_in * self.n_in * self.lanes,
                          dtype=np.float32)
         _gather_phase(phase.reshape(-1), n_b, n, self.beacon.reshape(-1),
                       self.offset_y.reshape(-1), self.offset_x.reshape(-1), np.float32(ratio),
-                      n_steps, self.n_chunks, self.n_in, lanes)
+                      n_steps, self.n_chunks, self.n_in, self.lanes, lanes)
         return np.cos(lanes), np.sin(lanes, out=lanes)
 
 
 def _downlink_plan(wfs: ShackHartmann, n_beacons: int) -> _LanePlan:
+    lanes = _LANES
     n_s = wfs.samples_per_subaperture
     n_v = wfs.n_valid
-    per_beacon = -(-n_v // _LANES)
-    v = np.arange(per_beacon * _LANES)
+    per_beacon = -(-n_v // lanes)
+    v = np.arange(per_beacon * lanes)
     index = wfs.subaperture_index[np.minimum(v, n_v - 1)]
-    offset_y = np.tile((index[:, 0] * n_s).reshape(per_beacon, _LANES), (n_beacons, 1))
-    offset_x = np.tile((index[:, 1] * n_s).reshape(per_beacon, _LANES), (n_beacons, 1))
-    beacon = np.repeat(np.arange(n_beacons), per_beacon)[:, None] * np.ones(_LANES, np.int64)
-    amp = np.zeros((per_beacon * _LANES, n_s, n_s), dtype=np.float32)
+    offset_y = np.tile((index[:, 0] * n_s).reshape(per_beacon, lanes), (n_beacons, 1))
+    offset_x = np.tile((index[:, 1] * n_s).reshape(per_beacon, lanes), (n_beacons, 1))
+    beacon = np.repeat(np.arange(n_beacons), per_beacon)[:, None] * np.ones(lanes, np.int64)
+    amp = np.zeros((per_beacon * lanes, n_s, n_s), dtype=np.float32)
     amp[:n_v] = wfs.amplitude
-    amp = np.ascontiguousarray(amp.reshape(per_beacon, _LANES, n_s, n_s).transpose(0, 2, 3, 1))
+    amp = np.ascontiguousarray(amp.reshape(per_beacon, lanes, n_s, n_s).transpose(0, 2, 3, 1))
     n_fft = _next_pow2(2 * n_s)
-    return _LanePlan(n_s, n_fft, *_twiddles(n_fft), beacon.astype(np.int64),
+    return _LanePlan(n_s, n_fft, lanes, beacon.astype(np.int64),
                      offset_y.astype(np.int64), offset_x.astype(np.int64), amp, per_beacon)
-
-
-def _uplink_plan(wfs: ShackHartmann, n_beacons: int) -> _LanePlan:
-    n_l = wfs.launch_grid.n_pix
-    n_chunks = -(-n_beacons // _LANES)
-    lanes = np.arange(n_chunks * _LANES)
-    beacon = np.where(lanes < n_beacons, lanes, 0).reshape(n_chunks, _LANES)
-    amp = np.zeros((n_chunks * _LANES, n_l, n_l), dtype=np.float32)
-    amp[:n_beacons] = wfs.launch_mask
-    amp = np.ascontiguousarray(amp.reshape(n_chunks, _LANES, n_l, n_l).transpose(0, 2, 3, 1))
-    zeros = np.zeros((n_chunks, _LANES), dtype=np.int64)
-    n_fft = _next_pow2(2 * n_l)
-    return _LanePlan(n_l, n_fft, *_twiddles(n_fft), beacon.astype(np.int64), zeros, zeros,
-                     amp, n_chunks)
 
 
 def _signed_harmonics(n_fft: int) -> np.ndarray:
@@ -719,12 +651,10 @@ def _signed_harmonics(n_fft: int) -> np.ndarray:
 @dataclass(frozen=True, eq=False)
 class _ExposurePlan:
     down: _LanePlan
-    up: _LanePlan
     q_index: np.ndarray     # (N,) index of each internal harmonic on the fft_size grid, -1 if none
-    ey: np.ndarray          # (n_pix, 2, N) pixel integrals E_y (re, im) on the internal grid
-    ex: np.ndarray          # (n_pix, 2, N/2) weighted E_x
-    up_q_index: np.ndarray  # (N,) index on the uplink grid, -1 if outside
-    no_elongation: np.ndarray  # (N, N/2, 2, n_lanes) unit OTF
+    ey: np.ndarray          # (n_pix, N) complex64 pixel integrals E_y on the internal grid
+    ex: np.ndarray          # (n_pix, N/2) complex64 weighted E_x
+    no_elongation: np.ndarray  # (N, chunks_per_beacon, N/2, L) complex64 unit OTF
 
 
 def _exposure_plan(wfs: ShackHartmann, n_beacons: int) -> _ExposurePlan:
@@ -732,7 +662,6 @@ def _exposure_plan(wfs: ShackHartmann, n_beacons: int) -> _ExposurePlan:
     if n_beacons in plans:
         return plans[n_beacons]
     down = _downlink_plan(wfs, n_beacons)
-    up = _uplink_plan(wfs, n_beacons)
     m = wfs.fft_size
     n_fft, half = down.n_fft, down.n_fft // 2
     q = _signed_harmonics(n_fft)
@@ -743,41 +672,35 @@ def _exposure_plan(wfs: ShackHartmann, n_beacons: int) -> _ExposurePlan:
     ex = np.zeros((wfs.n_pixels, half), dtype=np.complex64)
     n_p = min(half, m // 2 + 1)
     ex[:, :n_p] = e_x[:, :n_p]
-    qu = np.where(np.abs(q) < up.n_fft // 2, q % up.n_fft, -1)
-    n_lanes = down.chunks_per_beacon * _LANES
-    no_elongation = np.zeros((n_fft, half, 2, n_lanes), np.float32)
-    no_elongation[:, :, 0] = 1.0
-    plan = _ExposurePlan(
-        down, up, q_index.astype(np.int64),
-        np.ascontiguousarray(np.stack([ey.real, ey.imag], axis=1), dtype=np.float32),
-        np.ascontiguousarray(np.stack([ex.real, ex.imag], axis=1), dtype=np.float32),
-        qu.astype(np.int64), no_elongation)
+    no_elongation = np.ones((n_fft, down.chunks_per_beacon, half, down.lanes), np.complex64)
+    plan = _ExposurePlan(down, q_index.astype(np.int64), ey.astype(np.complex64),
+                         ex.astype(np.complex64), no_elongation)
     plans[n_beacons] = plan
     return plan
 
 
 def _exposure_uplink_otf(wfs: ShackHartmann, plan: _ExposurePlan, uplink: np.ndarray,
                          ratio: float) -> np.ndarray:
-    """Exposure-mean uplink OTF (n_beacons, N, N/2, 2) [re, im] on the downlink harmonics.
+    """Exposure-mean uplink OTF (n_beacons, N, N/2) complex64 on the downlink harmonics.
 
-    The steps' spots are summed before the transform and the sum normalised
-    to unit flux: the mean of the steps' unit-flux OTFs, since every step's
-    spot has the same flux (Parseval, phase-only changes).
+    As :func:`uplink_otf`, but the steps' spots are summed before the single
+    transform and the sum normalised to unit flux: the mean of the steps'
+    unit-flux OTFs, since every step's spot has the same flux (Parseval,
+    phase-only changes).
     """
-    n_b = uplink.shape[1]
-    up = plan.up
-    cos_p, sin_p = up.trig(uplink, ratio)
-    spec = np.empty((up.n_chunks, up.n_fft, up.n_fft // 2, 2, _LANES), np.float32)
-    _lane_kernels(up.n_fft, up.n_in).spectra(cos_p, sin_p, up.amp.reshape(-1), uplink.shape[0],
-                                             up.n_chunks, spec.reshape(-1))
-    spec = spec.transpose(0, 4, 1, 2, 3).reshape(-1, up.n_fft, up.n_fft // 2, 2)[:n_b]
-    spec = spec / spec[:, :1, :1, :1]
+    m = wfs.fft_size
+    phase = uplink * np.float32(ratio)
+    field = wfs.launch_mask * (np.cos(phase) + 1j * np.sin(phase)).astype(np.complex64)
+    spectrum = scipy.fft.fft2(field, s=(m, m), overwrite_x=True)
+    spot = spectrum.real**2 + spectrum.imag**2
+    otf = scipy.fft.rfft2(spot.sum(axis=0))
+    otf /= otf[:, :1, :1].real
     n_fft, half = plan.down.n_fft, plan.down.n_fft // 2
-    otf = np.zeros((n_b, n_fft, half, 2), dtype=np.float32)
-    n_p = min(half, up.n_fft // 2)
-    rows = plan.up_q_index >= 0
-    otf[:, rows, :n_p] = spec[:, plan.up_q_index[rows], :n_p]
-    return otf
+    out = np.zeros((otf.shape[0], n_fft, half), dtype=np.complex64)
+    n_p = min(half, m // 2 + 1)
+    rows = plan.q_index >= 0
+    out[:, rows, :n_p] = otf[:, plan.q_index[rows], :n_p]
+    return out
 
 
 def exposure_images(wfs: ShackHartmann, downlink_phase_rad: np.ndarray,
@@ -803,10 +726,10 @@ def exposure_images(wfs: ShackHartmann, downlink_phase_rad: np.ndarray,
     which chains :func:`intensity_samples`, :func:`intensity_spectra`,
     :func:`uplink_otf` and :func:`pixel_images`; here all steps, beacons and
     sub-apertures go through one fused, SIMD-vectorised kernel (see
-    ``_lane_kernels``): the steps' intensities are summed before their single
-    spectrum, the spot OTFs multiply only the half-plane harmonics that the
-    field's autocorrelation can reach, and the pixel integration is done on
-    the fly.
+    ``_lane_kernels``): pruned radix-2 FFTs of the fields, the steps'
+    intensities summed before their single spectrum, the spot OTFs applied to
+    the half-plane harmonics only; then the pixel integration is two complex
+    matrix products for all sub-apertures at once.
     """
     downlink = np.ascontiguousarray(downlink_phase_rad, dtype=np.float32)
     if downlink.ndim != 4:
@@ -823,22 +746,25 @@ def exposure_images(wfs: ShackHartmann, downlink_phase_rad: np.ndarray,
         el = np.empty_like(plan.no_elongation)
         _gather_elongation(np.ascontiguousarray(elongation, dtype=np.complex64), plan.q_index,
                            min(half, wfs.fft_size // 2 + 1), el)
-    if uplink_phase_rad is None:
-        up = np.zeros((n_beacons, n_fft, half, 2), np.float32)
-        up[..., 0] = 1.0
-    else:
+    spot = np.full((n_beacons, n_fft, half), 1.0 / (n_fft**2 * wfs.samples_per_subaperture**2
+                                                     * n_steps), dtype=np.complex64)
+    if uplink_phase_rad is not None:
         uplink = np.ascontiguousarray(uplink_phase_rad, dtype=np.float32)
         if uplink.ndim != 4:
             raise ValueError("uplink phase must be (T, n_beacons, n_l, n_l)")
-        up = _exposure_uplink_otf(wfs, plan, uplink, ratio)
-    scale = np.float32(1.0 / (n_fft**2 * wfs.samples_per_subaperture**2 * n_steps))
-    lanes = np.empty((down.n_chunks, wfs.n_pixels, wfs.n_pixels, _LANES), dtype=np.float32)
-    _lane_kernels(n_fft, down.n_in, wfs.n_pixels).images(
-        cos_p, sin_p, down.amp.reshape(-1), n_steps, down.n_chunks, down.chunks_per_beacon,
-        el.reshape(-1), el.shape[-1], up.reshape(-1), plan.ey.reshape(-1), plan.ex.reshape(-1),
-        scale, lanes.reshape(-1))
+        spot *= _exposure_uplink_otf(wfs, plan, uplink, ratio)
+    # one spectrum per exposure (the steps' intensities summed) times the spot
+    # OTFs (elongation x uplink x normalisation), then the pixel integrals
+    lanes = down.lanes
+    spectra = np.empty((n_fft, down.n_chunks * half * lanes), np.complex64)
+    _lane_kernels(n_fft, down.n_in, lanes).spectra(cos_p, sin_p, down.amp.reshape(-1), n_steps,
+                                                   down.n_chunks, el.reshape(-1),
+                                                   spot.reshape(-1), spectra.reshape(-1))
+    rows = (plan.ey @ spectra).reshape(wfs.n_pixels * down.n_chunks, half, lanes)
+    pixels = np.matmul(plan.ex, rows).real  # (y, chunk, x, lane)
+    pixels = pixels.reshape(wfs.n_pixels, down.n_chunks, wfs.n_pixels, lanes).transpose(1, 0, 2, 3)
     p = wfs.n_pixels
-    images = lanes.reshape(n_beacons, -1, p, p, _LANES).transpose(0, 1, 4, 2, 3)
+    images = pixels.reshape(n_beacons, -1, p, p, lanes).transpose(0, 1, 4, 2, 3)
     return np.ascontiguousarray(images.reshape(n_beacons, -1, p, p)[:, :wfs.n_valid])
 
 

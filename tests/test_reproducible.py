@@ -1,0 +1,49 @@
+"""Same config and seed give the same numbers; another seed gives others."""
+
+import numpy as np
+
+from luckyao.atmosphere import strip_screen
+from luckyao.detector import Detector
+from luckyao.imaging import Imager
+from luckyao.lucky import run_lucky
+from luckyao.propagation import ScreenSet
+from luckyao.simulate import System, simulate
+from luckyao.turbulence import strip_specs
+
+CASE = {
+    "duration_s": 0.2, "time_step_s": 0.0025,
+    "telescope": {"diameter_m": 4.2, "obscuration_m": 1.2},
+    "atmosphere": {"r0_500nm_m": 0.135, "r0_amplitude_m": 0.0, "r0_period_s": 1.0, "outer_scale_m": 20.0,
+                   "height_m": [0.0, 5000.0], "cn2_fraction": [0.7, 0.3],
+                   "wind_speed_m_s": [10.0, 20.0], "wind_direction_deg": [0.0, 90.0]},
+    "camera": {"wavelength_m": 8e-7, "n_pixels": 64, "field_of_view_arcsec": 1.25, "frame_time_s": 0.01},
+    "targets_arcsec": [[0.0, 0.0]], "ao": {"mode": "none"},
+}
+SPEC = {"duration_s": 0.2, "max_pixel_m": 0.1, "field_radius_arcsec": 1.0, "min_along_m": 20.0,
+        "min_across_m": 10.0, "time_step_s": 0.0025, "diameter_m": 4.2, "outer_scale_m": 20.0,
+        "height_m": [0.0, 5000.0], "wind_speed_m_s": [10.0, 20.0]}
+
+
+def _run(seed):
+    specs = strip_specs(SPEC)
+    screens = ScreenSet.from_screens(
+        specs, [strip_screen(s, 20.0, np.random.default_rng([seed, i])) for i, s in enumerate(specs)])
+    system = System.from_config(CASE)
+    frames = []
+    telemetry = simulate(system, screens, lambda start, block: frames.append(block.copy()))
+    cube = np.concatenate(frames, axis=1)[0]
+    imager = Imager(system.telescope, system.camera)
+    lucky = run_lucky(lambda: iter([(0, cube)]), len(cube), [Detector("faint", 500.0, 1.0)], [0.1, 1.0],
+                      imager.diffraction_limited_peak, 1.25 / 64, seed)
+    return cube, telemetry, lucky
+
+
+def test_same_seed_same_numbers_other_seed_other_numbers():
+    cube_a, telemetry_a, lucky_a = _run(3)
+    cube_b, telemetry_b, lucky_b = _run(3)
+    np.testing.assert_array_equal(cube_a, cube_b)
+    np.testing.assert_array_equal(telemetry_a.true_rms_nm, telemetry_b.true_rms_nm)
+    np.testing.assert_array_equal(lucky_a.strehl, lucky_b.strehl)  # detector noise too
+    cube_c, _, lucky_c = _run(4)
+    assert not np.array_equal(cube_a, cube_c)
+    assert not np.array_equal(lucky_a.strehl, lucky_c.strehl)
