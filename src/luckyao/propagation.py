@@ -34,45 +34,54 @@ def footprint_m(points_x_m, points_y_m, layer_height_m, los: LineOfSight):
             scale * np.asarray(points_y_m) + los.theta_y_rad * layer_height_m)
 
 
+_U = numba.uint64  # unsigned indices: no negative-index wraparound, faster gathers
+
+
 @numba.njit(cache=True, fastmath=True, nogil=True)
 def _sample_kernel(screens, starts, strides, shifts, affine, row_start, row_end, layer_scale,
                    out):  # pragma: no cover (jit)
-    """out[d, y, x] = sum_l scale[i_layer] * bilinear(screen_l at the grid point's footprint),
+    """out[d, y, x] = sum_l scale[l] * bilinear(screen_l at the grid point's footprint),
     for ``row_start[y] <= x < row_end[y]`` (zero elsewhere).
 
     ``affine[d, l]`` = (along0, across0, d_along/dx, d_across/dx, d_along/dy,
-    d_across/dy) in screen samples at t = 0; ``shifts[i_layer]`` the frozen-flow shift
+    d_across/dy) in screen samples at t = 0; ``shifts[l]`` the frozen-flow shift
     [samples along the wind] now. Per row, a first loop computes taps and
-    weights (vectorisable), a second gathers and blends.
+    weights (vectorisable), a second gathers and blends. Footprints stay on the
+    screens (checked by the caller), so every index is non-negative.
     """
     n_dir, n_y, n_x = out.shape
-    tap = np.empty(n_x, np.int64)
+    tap = np.empty(n_x, np.uint64)
     w_along = np.empty(n_x, np.float32)
     w_across = np.empty(n_x, np.float32)
-    out[:] = 0.0
+    flat = out.reshape(-1)
+    flat[:] = 0.0
     for d in range(n_dir):
         for i_layer in range(starts.shape[0]):
-            origin = starts[i_layer]
-            stride = strides[i_layer]
+            origin = _U(starts[i_layer])
+            stride = _U(strides[i_layer])
             scale = np.float32(layer_scale[i_layer])
             a0 = affine[d, i_layer, 0] - shifts[i_layer]
-            c0, a_x, c_x, a_y, c_y = affine[d, i_layer, 1], affine[d, i_layer, 2], affine[d, i_layer, 3], affine[d, i_layer, 4], affine[d, i_layer, 5]
+            c0, a_x, c_x = affine[d, i_layer, 1], affine[d, i_layer, 2], affine[d, i_layer, 3]
+            a_y, c_y = affine[d, i_layer, 4], affine[d, i_layer, 5]
             for y in range(n_y):
                 row_a = a0 + y * a_y
                 row_c = c0 + y * c_y
                 for x in range(row_start[y], row_end[y]):
                     along = row_a + x * a_x
                     across = row_c + x * c_x
-                    i = np.int64(along)
-                    j = np.int64(across)
-                    w_along[x] = along - i
-                    w_across[x] = across - j
+                    i = np.uint64(along)
+                    j = np.uint64(across)
+                    w_along[x] = np.float32(along - i)
+                    w_across[x] = np.float32(across - j)
                     tap[x] = origin + i * stride + j
+                base = _U((d * n_y + y) * n_x)
                 for x in range(row_start[y], row_end[y]):
-                    k = tap[x]
-                    low = screens[k] + w_across[x] * (screens[k + 1] - screens[k])
-                    high = screens[k + stride] + w_across[x] * (screens[k + stride + 1] - screens[k + stride])
-                    out[d, y, x] += scale * (low + w_along[x] * (high - low))
+                    t = tap[x]
+                    s00, s01 = screens[t], screens[t + _U(1)]
+                    s10, s11 = screens[t + stride], screens[t + stride + _U(1)]
+                    low = s00 + w_across[x] * (s01 - s00)
+                    high = s10 + w_across[x] * (s11 - s10)
+                    flat[base + _U(x)] += scale * (low + w_along[x] * (high - low))
 
 
 @dataclass(frozen=True, eq=False)
