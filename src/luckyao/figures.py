@@ -113,11 +113,11 @@ def long_exposure_check_data(settings: dict, names, datasets) -> xr.Dataset:
 
 
 def draw_long_exposure_check(ds: xr.Dataset, title: str):
-    fig, ax = plt.subplots(figsize=(6, 4.2), constrained_layout=True)
+    fig, ax = plt.subplots(figsize=(7, 4.5), constrained_layout=True)
     x = np.arange(ds.sizes["case"])
     ax.errorbar(x - 0.08, ds.simulated, yerr=ds.simulated_error, fmt="o", capsize=3, label="simulated ±1σ")
     ax.plot(x + 0.08, ds.analytic, "s", label="analytic")
-    ax.set_xticks(x, [str(v) for v in ds.label.values], rotation=20, ha="right", fontsize=8)
+    ax.set_xticks(x, [f"{c}\nmean r0 {r:.1f} cm" for c, r in zip(ds.case.values, ds.r0_cm.values)], fontsize=8)
     ax.set_ylabel("long-exposure Strehl ratio (no recentring)")
     ax.grid(alpha=0.3)
     ax.legend()
