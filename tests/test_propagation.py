@@ -85,3 +85,19 @@ def test_leaving_the_screen_is_an_error():
         prop.sample(prop.n_steps_max, [1.0])
     with pytest.raises(ValueError, match="leaves its screen"):
         Propagator([layer], screens, [LineOfSight(0.0, 0.01)], GRID)  # 10 m across the wind
+
+
+def test_uplink_line_of_sight_follows_the_beam_from_an_offset_launch():
+    """The uplink cone, anchored on an off-axis launch point, against the ray
+    geometry of ``lgs.cone_coordinates``."""
+    from luckyao.lgs import cone_coordinates
+    from luckyao.sensing import uplink_line_of_sight
+
+    launch, direction, beacon_height = np.array([0.4, -0.3]), (5e-5, -1e-4), 22000.0
+    x, y = GRID.xy_m
+    for height in (0.0, 4500.0, 18000.0):
+        expected = cone_coordinates(x + launch[0], y + launch[1], height, beacon_height, direction,
+                                    origin_xy_m=launch)
+        got = footprint_m(x + launch[0], y + launch[1], height,
+                          uplink_line_of_sight(direction, launch, beacon_height))
+        np.testing.assert_allclose(got, expected, atol=1e-12)

@@ -18,7 +18,6 @@ import xarray as xr  # noqa: E402
 from .analytic import long_exposure_strehl  # noqa: E402
 from .config import sha256  # noqa: E402
 from .datasets import case_config, open_dataset, provenance, write_dataset  # noqa: E402
-from .pupil import Telescope  # noqa: E402
 from .reconstructor import lgs_config  # noqa: E402
 from .simulate import System  # noqa: E402
 from .units import ARCSEC_RAD  # noqa: E402
@@ -96,8 +95,8 @@ def long_exposure_check_data(settings: dict, names, datasets) -> xr.Dataset:
                                .isel(target=0)))
         error.append(float(ds["long_exposure_strehl_error"].isel(target=0)))
         r0_samples = system.r0.r0_m(np.arange(system.n_frames * system.steps_per_frame) * system.time_step_s)
-        analytic.append(long_exposure_strehl(Telescope(system.telescope.diameter_m, system.telescope.obscuration_m),
-                                             system.camera.wavelength_m, r0_samples, system.outer_scale_m))
+        analytic.append(long_exposure_strehl(system.telescope, system.camera.wavelength_m, r0_samples,
+                                             system.outer_scale_m))
     attrs = {"units": "1"}
     return xr.Dataset(
         {
@@ -222,8 +221,7 @@ def rms_truth_data(settings: dict, names, datasets) -> xr.Dataset:
                          {"units": "1", "long_name": "rank correlation of lgs_rms_nm and true_rms_nm"}),
         },
         coords={**_case_coords(names, datasets),
-                "time_s": ("frame", datasets[0]["time_s"].values if "time_s" in datasets[0] else
-                           np.arange(lgs.shape[1]), {"units": "s", "long_name": "frame start time"})},
+                "time_s": ("frame", datasets[0]["time_s"].values, {"units": "s", "long_name": "frame start time"})},
     )
 
 

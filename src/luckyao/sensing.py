@@ -22,6 +22,14 @@ from .units import REFERENCE_WAVELENGTH_M
 from .wfs import lgs_elongation_otf, measure_slopes
 
 
+def uplink_line_of_sight(direction_rad, launch_xy_m, height_m: float) -> LineOfSight:
+    """The line of sight whose cone through points ``p`` of the launch aperture is
+    the uplink beam's: anchored on the launch point ``o``, the beam crosses height
+    ``h`` at ``o + (p - o) s + theta h = s p + (theta + o / H) h`` (s = 1 - h/H)."""
+    return LineOfSight(direction_rad[0] + launch_xy_m[0] / height_m,
+                       direction_rad[1] + launch_xy_m[1] / height_m, height_m)
+
+
 class LgsSensing:
     """Beacons, WFS and per-target reconstructors of one case."""
 
@@ -42,9 +50,7 @@ class LgsSensing:
         launch = self.lgs.launch_xy_m
         self._down = Propagator(layers, screens, [LineOfSight(tx, ty, height) for tx, ty in directions],
                                 self.wfs.grid, mask=self.wfs.mask)
-        # uplink cone anchored on the launch point o: o + (p - o) s + theta h
-        # = s p + (theta + o / H) h for launch-grid points p = o + g
-        up_los = [LineOfSight(tx + launch[0] / height, ty + launch[1] / height, height) for tx, ty in directions]
+        up_los = [uplink_line_of_sight(direction, launch, height) for direction in directions]
         self._up = Propagator(layers, screens, up_los, self.wfs.launch_grid, centre_xy_m=tuple(launch))
         self.elongation = lgs_elongation_otf(self.wfs, self.lgs)
         n_b, n, n_launch = len(directions), self.wfs.grid.n_pix, self.wfs.launch_grid.n_pix

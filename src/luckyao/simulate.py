@@ -17,7 +17,9 @@ from .propagation import LineOfSight, Propagator, ScreenSet
 from .progress import Progress
 from .pupil import Telescope, TiltRemover
 from .sensing import LgsSensing
+from .tomography import lucky_frame_rms_nm
 from .units import ARCSEC_RAD, REFERENCE_WAVELENGTH_M, phase_rad_to_nm
+
 
 @dataclass(frozen=True)
 class System:
@@ -73,7 +75,7 @@ def simulate(system: System, screens: ScreenSet, write_frames, sensing: LgsSensi
     propagator = Propagator(list(system.layers), screens, list(system.targets), imager.grid, mask=mask)
     tilt = TiltRemover.for_mask(imager.grid, mask)
     n_targets, n_frames, spf = len(system.targets), system.n_frames, system.steps_per_frame
-    steps_max = min(propagator.n_steps_max, sensing.n_steps_max if sensing else propagator.n_steps_max)
+    steps_max = propagator.n_steps_max if sensing is None else min(propagator.n_steps_max, sensing.n_steps_max)
     if n_frames * spf > steps_max:
         raise ValueError(f"the screens hold {steps_max} steps, the case needs {n_frames * spf}")
     to_camera = np.float32(REFERENCE_WAVELENGTH_M / system.camera.wavelength_m)
@@ -91,7 +93,7 @@ def simulate(system: System, screens: ScreenSet, write_frames, sensing: LgsSensi
             frame = start + j
             intensity = None
             rms2 = np.zeros(n_targets)
-            lgs_rms2, exposures = np.zeros(n_targets), 0
+            exposures = []
             for s in range(spf):
                 step = frame * spf + s
                 layer_scale = system.layer_scale(step)
@@ -102,10 +104,9 @@ def simulate(system: System, screens: ScreenSet, write_frames, sensing: LgsSensi
                 if sensing is not None:
                     exposure_rms = sensing.step(step, layer_scale)
                     if exposure_rms is not None:
-                        lgs_rms2 += exposure_rms**2
-                        exposures += 1
+                        exposures.append(exposure_rms)
             if exposures:
-                lgs_rms[:, frame] = np.sqrt(lgs_rms2 / exposures)
+                lgs_rms[:, frame] = lucky_frame_rms_nm(np.stack(exposures, axis=-1))
             buffer[:, j] = imager.to_pixels(intensity / spf)
             axis_strehl[:, frame] = buffer[:, j, n_pix // 2, n_pix // 2] / imager.diffraction_limited_peak
             true_rms_nm[:, frame] = phase_rad_to_nm(np.sqrt(rms2 / spf), REFERENCE_WAVELENGTH_M)

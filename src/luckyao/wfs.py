@@ -400,6 +400,21 @@ def _lane_kernels(n_fft: int, n_in: int, lanes: int) -> SimpleNamespace:
             h //= 2
 
     @numba.njit(nogil=True, inline="always")
+    def butterfly(re, im, o0, o1, wr, wi):  # pragma: no cover (jit)
+        """One radix-2 DIT butterfly on every lane: (a, b) -> (a + w b, a - w b)."""
+        for lane in range(lanes):
+            br = re[o1 + lane]
+            bi = im[o1 + lane]
+            tr = br * wr - bi * wi
+            ti = br * wi + bi * wr
+            ar = re[o0 + lane]
+            ai = im[o0 + lane]
+            re[o0 + lane] = ar + tr
+            im[o0 + lane] = ai + ti
+            re[o1 + lane] = ar - tr
+            im[o1 + lane] = ai - ti
+
+    @numba.njit(nogil=True, inline="always")
     def dit(re, im, lower_half_only):  # pragma: no cover (jit)
         """In-place radix-2 DIT (bit-reversed in, natural out); with
         ``lower_half_only`` the last stage only writes outputs 0..N/2-1."""
@@ -412,17 +427,7 @@ def _lane_kernels(n_fft: int, n_in: int, lanes: int) -> SimpleNamespace:
                     wi = tw_im[k * step]
                     o0 = _U((start + k) * lanes)
                     o1 = _U((start + k + h) * lanes)
-                    for lane in range(lanes):
-                        br = re[o1 + lane]
-                        bi = im[o1 + lane]
-                        tr = br * wr - bi * wi
-                        ti = br * wi + bi * wr
-                        ar = re[o0 + lane]
-                        ai = im[o0 + lane]
-                        re[o0 + lane] = ar + tr
-                        im[o0 + lane] = ai + ti
-                        re[o1 + lane] = ar - tr
-                        im[o1 + lane] = ai - ti
+                    butterfly(re, im, o0, o1, wr, wi)
             h *= 2
         for k in range(half):
             wr = tw_re[k]
@@ -436,17 +441,7 @@ def _lane_kernels(n_fft: int, n_in: int, lanes: int) -> SimpleNamespace:
                     re[o0 + lane] += br * wr - bi * wi
                     im[o0 + lane] += br * wi + bi * wr
             else:
-                for lane in range(lanes):
-                    br = re[o1 + lane]
-                    bi = im[o1 + lane]
-                    tr = br * wr - bi * wi
-                    ti = br * wi + bi * wr
-                    ar = re[o0 + lane]
-                    ai = im[o0 + lane]
-                    re[o0 + lane] = ar + tr
-                    im[o0 + lane] = ai + ti
-                    re[o1 + lane] = ar - tr
-                    im[o1 + lane] = ai - ti
+                butterfly(re, im, o0, o1, wr, wi)
 
     @numba.njit(nogil=True, inline="always")
     def load_padded(src_re, src_im, src_offset, src_stride, re, im):  # pragma: no cover
