@@ -62,19 +62,18 @@ def main(config_path="config/config.yaml"):
             sensing.step(step, system.layer_scale(step))
         camera = ["propagation", "science image", "truth rms", "frame"]
         stages = dict.fromkeys(camera + ["LGS propagation", "WFS", "reconstruction"], 0.0)
-        intensity = None
+        intensity = np.zeros((len(system.targets), imager.fft_size, imager.fft_size), dtype=np.float32)
         for step in range(N_STEPS):
             t0 = time.perf_counter()
             phase = propagator.sample(step, system.layer_scale(step))[:, imager.mask]
             t1 = time.perf_counter()
-            image = imager.intensity(phase * to_camera)
-            intensity = image if intensity is None else intensity + image
+            imager.accumulate(phase * to_camera, intensity)
             t2 = time.perf_counter()
             tilt.rms(phase)
             t3 = time.perf_counter()
             if step % system.steps_per_frame == system.steps_per_frame - 1:
                 imager.to_pixels(intensity / system.steps_per_frame)
-                intensity = None
+                intensity.fill(0.0)
             t4 = time.perf_counter()
             complete = sensing.sample(step, system.layer_scale(step))
             t5 = t6 = time.perf_counter()

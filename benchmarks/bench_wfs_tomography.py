@@ -2,7 +2,8 @@
 
 Reports ms per 2.5 ms simulation step for the WFS stage (4 LGS x 8x8, both
 time-steps' images of a 5 ms exposure, elongation and uplink, centroiding;
-cost of one exposure / 2) and for the reconstruction (slopes -> projected,
+cost of one exposure / 2), with its stages in ms per exposure (the compiled
+kernels of luckyao.wfs_kernel), and for the reconstruction (slopes -> projected,
 tilt-removed phase -> rms; one per exposure / 2), then the reconstructor
 build times and peak memory for 8x8, 16x16 and 32x32 (each build in a fresh
 subprocess so its peak RSS is its own).
@@ -26,6 +27,7 @@ from luckyao.lgs import LgsConfig  # noqa: E402
 from luckyao.pupil import Telescope  # noqa: E402
 from luckyao import tomography as tomo  # noqa: E402
 from luckyao import wfs as sh  # noqa: E402
+from luckyao import wfs_kernel as wk  # noqa: E402
 from luckyao.units import ARCSEC_RAD  # noqa: E402
 
 TELESCOPE = Telescope(4.2, 1.2)
@@ -77,29 +79,43 @@ def per_step() -> None:
 
     t_wfs = best_ms(lambda: sh.measure_slopes(wfs, downlink, 500e-9, elongation, uplink))
     t_images = best_ms(lambda: sh.exposure_images(wfs, downlink, 500e-9, elongation, uplink))
+    images = sh.exposure_images(wfs, downlink, 500e-9, elongation, uplink)
     t_rec = best_ms(lambda: tomo.lgs_rms_nm(rec, slopes), number=200)
     print(f"WFS 4 LGS x 8x8 ({wfs.n_valid} valid, n_s={wfs.samples_per_subaperture}, "
           f"M={wfs.fft_size}): {t_wfs:.2f} ms per 5 ms exposure (images {t_images:.2f}) "
           f"= {t_wfs / 2:.2f} ms per 2.5 ms step")
-    # sub-stages of exposure_images (private helpers; ms per 2.5 ms step)
-    plan = sh._exposure_plan(wfs, lgs.n_beacons)
-    down = plan.down
-    ratio = 500e-9 / wfs.wavelength_m
-    cos_p, sin_p = down.trig(downlink, ratio)
-    kernel = sh._lane_kernels(down.n_fft, down.n_in, down.lanes)
-    half = down.n_fft // 2
-    out = np.empty(down.n_fft * down.n_chunks * half * down.lanes, np.complex64)
-    spot = np.ones(lgs.n_beacons * down.n_fft * half, np.complex64)
-    t_trig = best_ms(lambda: down.trig(downlink, ratio))
-    t_up = best_ms(lambda: sh._exposure_uplink_otf(wfs, plan, uplink, ratio))
-    t_fft = best_ms(lambda: kernel.spectra(cos_p, sin_p, down.amp.reshape(-1), 2, down.n_chunks,
-                                           plan.no_elongation.reshape(-1), spot, out))
-    images = sh.exposure_images(wfs, downlink, 500e-9, elongation, uplink)
-    t_cog = best_ms(lambda: sh.remove_tip_tilt(sh.centroids_rad(wfs, images)), number=200)
-    t_rest = t_wfs - t_trig - t_up - t_fft - t_cog
-    print(f"  per step: phase gather + cos/sin {t_trig / 2:.3f}, uplink OTF {t_up / 2:.3f}, "
-          f"downlink FFTs + |.|^2 + spectrum x OTF {t_fft / 2:.3f}, centroids {t_cog / 2:.3f}, "
-          f"pixel integration + rest {t_rest / 2:.3f} ms")
+    # stages of one exposure (private kernels; ms per exposure, all chunks and steps)
+    plan = sh._exposure_plan(wfs, lgs.n_beacons, 2)
+    ratio = np.float32(500e-9 / wfs.wavelength_m)
+    n_chunks, lanes = plan.sources.shape
+    n_s, n_fft, n_lags = wfs.samples_per_subaperture, plan.n_fft, plan.n_lags
+    n_q, n_pix = plan.q_index.size, wfs.n_pixels
+
+    def buffer(*shape):
+        return np.ones(int(np.prod(shape)), np.float32)
+
+    phi, g = buffer(n_s, n_s, lanes), buffer(2, n_fft, n_s, lanes)
+    h = buffer(2, n_fft, n_lags, lanes)
+    c, el = buffer(2, n_q, n_lags, lanes), buffer(2, n_q, n_lags, lanes)
+    weights, pixels = buffer(2, n_pix, n_q + 1, n_lags), buffer(n_pix, n_pix, lanes)
+    spot = np.empty_like(plan.point_spot)
+    columns = wk._generated("columns", n_fft, n_s, lanes)
+    correlate = wk._generated("correlate", n_fft, n_s, lanes, n_lags)
+    spectrum = wk._generated("spectrum", n_fft, lanes, n_lags)
+    pixel = wk._generated("pixels", lanes, n_lags, n_pix)
+    phase, steps = downlink.reshape(-1), 2 * n_chunks
+    stages = {
+        "uplink OTF": best_ms(lambda: plan.uplink_otf(uplink.reshape(-1), ratio, plan.launch_amp,
+                                                      spot)),
+        "phase gather": steps * best_ms(lambda: wk.gather(phase, plan.sources[0], n, n_s, phi)),
+        "fields + y DFTs": steps * best_ms(lambda: columns(phi, ratio, plan.amp[0], g)),
+        "x autocorrelation": steps * best_ms(lambda: correlate(g, h, True)),
+        "ky DFTs": n_chunks * best_ms(lambda: spectrum(h, c)),
+        "OTF x pixels": n_chunks * best_ms(lambda: pixel(c, el, weights, pixels)),
+        "centroids + tilt": best_ms(lambda: sh.centroids_rad(wfs, images, remove_tilt=True)),
+    }
+    stages["driver + Python"] = t_wfs - sum(stages.values())
+    print("  ms per exposure: " + ", ".join(f"{name} {t:.3f}" for name, t in stages.items()))
     print(f"reconstruction + rms ({rec.shape[0]} points x {rec.shape[1]} slopes): "
           f"{t_rec:.3f} ms per exposure = {t_rec / 2:.3f} ms per step")
     print(f"WFS + reconstruction: {(t_wfs + t_rec) / 2:.2f} ms per step")

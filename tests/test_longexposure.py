@@ -24,7 +24,8 @@ CASE = {
 }
 SPEC = {"seed": 1, "duration_s": 20.0, "max_pixel_m": 0.016, "field_radius_arcsec": 0.0,
         "min_along_m": 100.0, "min_across_m": 4.0, "time_step_s": 0.0025, "diameter_m": 1.0,
-        "outer_scale_m": 20.0, "height_m": [0.0, 5000.0, 10000.0], "wind_speed_m_s": [40.0, 50.0, 60.0]}
+        "outer_scale_m": 20.0, "height_m": [0.0, 5000.0, 10000.0], "wind_speed_m_s": [40.0, 50.0, 60.0],
+        "wind_direction_deg": [0.0, 120.0, 240.0]}
 
 
 def test_uncorrected_long_exposure_strehl_matches_theory():

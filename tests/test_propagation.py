@@ -20,27 +20,30 @@ def _single_layer(height_m, speed, direction_deg, n_steps=200, radius_m=4.0, see
 
 def test_plane_screen_is_sampled_exactly_on_and_off_axis_with_cone_and_wind():
     """A screen linear in position is reproduced exactly by bilinear interpolation,
-    so this checks every geometric step: rotation to the wind frame, origin,
-    sample spacing, frozen-flow shift, cone scaling, off-axis and grid offsets."""
-    layer, screens, _ = _single_layer(5000.0, 13.0, 57.0)
-    spec = screens.specs[0]
-    a, b = 0.7, -1.3  # rad per m along and across the wind
-    along = spec.origin_m[0] + np.arange(spec.n_along) * spec.dx_m
-    across = spec.origin_m[1] + np.arange(spec.n_across) * spec.dx_m
-    plane = ScreenSet.from_screens([spec], [(a * along[:, None] + b * across[None, :]).astype(np.float32)])
-    lgs = LineOfSight(2e-5, -4e-5, 22000.0)
-    star = LineOfSight(-1e-4, 5e-5)
-    centre = (0.3, -0.2)
-    prop = Propagator([layer], plane, [star, lgs], GRID, centre_xy_m=centre)
-    x, y = GRID.xy_m
-    e = layer.wind_unit
-    for step in (0, 13, 150):
-        phase = prop.sample(step, [1.0])
-        for d, los in enumerate((star, lgs)):
-            fx, fy = footprint_m(x + centre[0], y + centre[1], layer.height_m, los)
-            qx, qy = fx - e[0] * 13.0 * DT_S * step, fy - e[1] * 13.0 * DT_S * step
-            expected = a * (qx * e[0] + qy * e[1]) + b * (-qx * e[1] + qy * e[0])
-            np.testing.assert_allclose(phase[d], expected, atol=2e-3)
+    so this checks every geometric step: the skewed strip's line offsets and
+    major axis, origin, sample spacing, frozen-flow shift, cone scaling,
+    off-axis and grid offsets, for winds closer to x and to y."""
+    a, b = 0.7, -1.3  # rad per m along sky x and y
+    for direction in (57.0, 160.0, 231.0, -20.0):
+        layer, screens, _ = _single_layer(5000.0, 13.0, direction, n_steps=3000)  # 98 m of flow
+        spec = screens.specs[0]
+        i, j = np.meshgrid(np.arange(spec.n_major), np.arange(spec.n_minor), indexing="ij")
+        major = spec.origin_m[0] + i * spec.dx_m
+        minor = spec.origin_m[1] + (j + spec.line_offset(i)) * spec.dx_m
+        sky_x, sky_y = (major, minor) if spec.major_axis == 0 else (minor, major)
+        plane = ScreenSet.from_screens([spec], [(a * sky_x + b * sky_y).astype(np.float32)])
+        lgs = LineOfSight(2e-5, -4e-5, 22000.0)
+        star = LineOfSight(-1e-4, 5e-5)
+        centre = (0.3, -0.2)
+        prop = Propagator([layer], plane, [star, lgs], GRID, centre_xy_m=centre)
+        x, y = GRID.xy_m
+        e = layer.wind_unit
+        for step in (0, 13, 2999):
+            phase = prop.sample(step, [1.0])
+            for d, los in enumerate((star, lgs)):
+                fx, fy = footprint_m(x + centre[0], y + centre[1], layer.height_m, los)
+                qx, qy = fx - e[0] * 13.0 * DT_S * step, fy - e[1] * 13.0 * DT_S * step
+                np.testing.assert_allclose(phase[d], a * qx + b * qy, atol=2e-3)
 
 
 def test_frozen_flow_moves_the_screen_by_the_wind_vector():

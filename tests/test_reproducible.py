@@ -21,7 +21,7 @@ CASE = {
 }
 SPEC = {"duration_s": 0.2, "max_pixel_m": 0.1, "field_radius_arcsec": 1.0, "min_along_m": 20.0,
         "min_across_m": 10.0, "time_step_s": 0.0025, "diameter_m": 4.2, "outer_scale_m": 20.0,
-        "height_m": [0.0, 5000.0], "wind_speed_m_s": [10.0, 20.0]}
+        "height_m": [0.0, 5000.0], "wind_speed_m_s": [10.0, 20.0], "wind_direction_deg": [0.0, 90.0]}
 
 
 def _run(seed):

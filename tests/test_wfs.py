@@ -1,12 +1,15 @@
 """Shack-Hartmann WFS against geometry and diffraction theory."""
 
+import numba
 import numpy as np
 import pytest
 
+from luckyao.codelets import Codelet, dft, term_value
 from luckyao.lgs import LgsConfig
 from luckyao.pupil import Telescope
 from luckyao.units import ARCSEC_RAD
 from luckyao import wfs as sh
+from luckyao.wfs_kernel import sincos
 
 TELESCOPE = Telescope(4.2, 1.2)
 WAVELENGTH_M = 532e-9
@@ -204,3 +207,89 @@ def test_fused_kernel_equals_the_step_by_step_model(n_sub):
     fast = sh.exposure_images(wfs, down, 532e-9, elongation, up)
     reference = sh.reference_exposure_images(wfs, down, 532e-9, elongation, up)
     np.testing.assert_allclose(fast, reference, atol=1e-6 * reference.max())
+
+
+def float64_exposure_images(wfs, downlink, phase_wavelength_m, elongation, uplink):
+    """The model of :func:`sh.exposure_images` in float64 numpy (Goodman ch. 4 far
+    fields, OTF products, exact pixel integrals), as a precision reference."""
+    m, n_s = wfs.fft_size, wfs.samples_per_subaperture
+    ratio = phase_wavelength_m / wfs.wavelength_m
+    intensity = sum(np.abs(np.fft.fft2(wfs.amplitude * np.exp(1j * ratio * wfs._split(step)),
+                                       s=(m, m))) ** 2 for step in downlink.astype(float))
+    spectra = np.fft.rfft2(intensity) / (m * m * n_s**2 * len(downlink))
+    spot = np.abs(np.fft.fft2(wfs.launch_mask * np.exp(1j * ratio * uplink.astype(float)),
+                              s=(m, m))) ** 2
+    otf = np.fft.rfft2(spot.sum(axis=0))
+    spectra *= elongation * (otf / otf[:, :1, :1].real)[:, None]
+    e_y, e_x = (e.astype(complex) for e in wfs._pixel_integrals)
+    return np.matmul(np.matmul(e_y, spectra), e_x.T).real
+
+
+@pytest.mark.parametrize("n_sub", [8, 16, 32])
+def test_fused_kernel_is_at_least_as_precise_as_the_step_by_step_model(n_sub):
+    """Against the model in float64, the fused float32 kernel errs less than the
+    step-by-step float32 chain (and both stay at float32 rounding level)."""
+    wfs = sh.ShackHartmann(TELESCOPE, n_sub, WAVELENGTH_M)
+    rng = np.random.default_rng(n_sub + 1)
+    n, n_l = wfs.grid.n_pix, wfs.launch_grid.n_pix
+    down = rng.normal(0, 2.0, (2, 4, n, n)).astype(np.float32)
+    up = rng.normal(0, 0.5, (2, 4, n_l, n_l)).astype(np.float32)
+    elongation = sh.lgs_elongation_otf(wfs, LgsConfig.rayleigh())
+    exact = float64_exposure_images(wfs, down, WAVELENGTH_M, elongation, up)
+
+    def error(images):
+        return np.abs(images - exact).max() / exact.max()
+
+    fused = error(sh.exposure_images(wfs, down, WAVELENGTH_M, elongation, up))
+    reference = error(sh.reference_exposure_images(wfs, down, WAVELENGTH_M, elongation, up))
+    assert fused <= reference < 1e-6
+
+
+def test_writable_elongation_is_read_at_every_call():
+    """The lane layout of a read-only elongation OTF is kept between calls; a
+    writable one may change in place, so it is read again."""
+    wfs = sh.ShackHartmann(TELESCOPE, 8, WAVELENGTH_M)
+    elongation = sh.lgs_elongation_otf(wfs, LgsConfig.rayleigh())
+    assert not elongation.flags.writeable
+    phase = tilt_phase(wfs, 0.1 * ARCSEC_RAD, 0.0)
+    long = sh.exposure_images(wfs, phase, WAVELENGTH_M, elongation)
+    np.testing.assert_array_equal(sh.exposure_images(wfs, phase, WAVELENGTH_M, elongation), long)
+    writable = elongation.copy()
+    np.testing.assert_array_equal(sh.exposure_images(wfs, phase, WAVELENGTH_M, writable), long)
+    writable[:] = 1.0
+    np.testing.assert_array_equal(sh.exposure_images(wfs, phase, WAVELENGTH_M, writable),
+                                  sh.exposure_images(wfs, phase, WAVELENGTH_M))
+
+
+def test_float32_sincos_is_accurate_to_one_ulp():
+    x = np.concatenate([np.linspace(-10, 10, 20001),
+                        np.random.default_rng(0).uniform(-6000, 6000, 20000)]).astype(np.float32)
+
+    @numba.njit
+    def both(x, cos_x, sin_x):
+        for i in range(x.size):
+            cos_x[i], sin_x[i] = sincos(x[i])
+
+    cos_x, sin_x = np.empty_like(x), np.empty_like(x)
+    both(x, cos_x, sin_x)
+    np.testing.assert_allclose(cos_x, np.cos(x.astype(float)), rtol=0, atol=1e-7)
+    np.testing.assert_allclose(sin_x, np.sin(x.astype(float)), rtol=0, atol=1e-7)
+
+
+@pytest.mark.parametrize("n_fft, n_in, n_out", [(32, 16, 32), (32, 32, 23), (16, 8, 16), (8, 3, 5)])
+def test_dft_codelet_matches_numpy_fft(n_fft, n_in, n_out):
+    """The generated split-radix statements (inputs beyond ``n_in`` pruned as zeros,
+    only the outputs |q| < (n_out + 1) / 2 kept) compute the DFT."""
+    codelet = Codelet()
+    inputs = [(codelet.input(f"xr{i}"), codelet.input(f"xi{i}")) if i < n_in else (None, None)
+              for i in range(n_fft)]
+    half = (n_out + 1) // 2
+    wanted = [dft(codelet, inputs)[q % n_fft] for q in range(1 - half, half)]
+    x = np.random.default_rng(n_fft).normal(size=(2, n_in))
+    namespace = {"np": np, **{f"xr{i}": x[0, i] for i in range(n_in)},
+                 **{f"xi{i}": x[1, i] for i in range(n_in)}, **codelet.constants}
+    exec("\n".join(codelet.source([t for v in wanted for t in v], "")), namespace)  # noqa: S102
+    got = [eval(term_value(re), namespace) + 1j * eval(term_value(im), namespace)
+           for re, im in wanted]
+    expected = np.fft.fft(x[0] + 1j * x[1], n_fft)[np.arange(1 - half, half) % n_fft]
+    np.testing.assert_allclose(got, expected, rtol=0, atol=1e-6 * np.abs(expected).max())

@@ -142,8 +142,7 @@ def sha256(value) -> str:
 
 
 def turbulence_spec(study: dict, case: dict) -> dict:
-    """Everything the shared screens depend on (not r0, Cn2 or wind direction:
-    those only scale or orient the same strips)."""
+    """Everything the shared screens depend on (not r0 or Cn2: those only scale them)."""
     atm = case["atmosphere"]
     return {
         "seed": study["seed"],
@@ -153,6 +152,7 @@ def turbulence_spec(study: dict, case: dict) -> dict:
         "outer_scale_m": atm["outer_scale_m"],
         "height_m": atm["height_m"],
         "wind_speed_m_s": atm["wind_speed_m_s"],
+        "wind_direction_deg": atm["wind_direction_deg"],
     }
 
 

@@ -15,8 +15,8 @@ from dataclasses import dataclass
 from functools import cached_property
 
 import numpy as np
-import scipy.fft
 
+from .farfield import FarField
 from .pupil import PupilGrid, Telescope
 from .units import ARCSEC_RAD
 
@@ -66,31 +66,19 @@ class Imager:
         return int(self.mask.sum())
 
     @cached_property
-    def _mask_flat_index(self) -> np.ndarray:
-        return np.flatnonzero(self.mask)
+    def _far_field(self) -> FarField:
+        return FarField(self.mask, self.fft_size)
 
-    def field(self, phase_rad: np.ndarray) -> np.ndarray:
-        """Pupil fields (k, N, N) complex64 from phases (k, n_valid) [rad] on the mask."""
-        phase_rad = np.asarray(phase_rad, dtype=np.float32)
-        n = self.grid.n_pix
-        field = np.zeros(phase_rad.shape[:-1] + (n * n,), dtype=np.complex64)
-        parts = field.view(np.float32).reshape(field.shape + (2,))
-        parts[..., self._mask_flat_index, 0] = np.cos(phase_rad)
-        parts[..., self._mask_flat_index, 1] = np.sin(phase_rad)
-        return field.reshape(phase_rad.shape[:-1] + (n, n))
+    def accumulate(self, phase_rad: np.ndarray, out: np.ndarray) -> None:
+        """Add to ``out`` (k, M, M) float32 the unshifted, unbinned intensity of each phase row
+        (k, n_valid) [rad] on the mask: ``|FFT_M(exp(i phi))|^2 / (M^2 n_valid)`` (farfield)."""
+        self._far_field.accumulate(np.asarray(phase_rad, dtype=np.float32), out)
 
     def intensity(self, phase_rad: np.ndarray) -> np.ndarray:
-        """Unshifted, unbinned intensities (k, M, M) float32, each of unit total flux.
-
-        Pruned FFT: the pupil occupies N of the M rows, so the first transform
-        runs over those N rows only.
-        """
-        m = self.fft_size
-        rows = scipy.fft.fft(self.field(phase_rad), n=m, axis=-2)
-        spectrum = scipy.fft.fft(rows, n=m, axis=-1)
-        power = spectrum.real**2 + spectrum.imag**2
-        power *= np.float32(1.0 / (m * m * self.n_valid))
-        return power
+        """Unshifted, unbinned intensities (k, M, M) float32, each of unit total flux."""
+        out = np.zeros((len(phase_rad), self.fft_size, self.fft_size), dtype=np.float32)
+        self.accumulate(phase_rad, out)
+        return out
 
     def to_pixels(self, intensity: np.ndarray) -> np.ndarray:
         """Centre (fftshift) and bin unshifted intensities to (k, n, n) detector pixels."""

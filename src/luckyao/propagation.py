@@ -4,9 +4,10 @@ A ray from pupil point ``g`` [m] towards direction ``theta`` [rad] from a
 source at height ``H`` crosses the layer at height ``h`` at
 ``(1 - h/H) g + theta h`` (cone effect; ``H = inf`` for a star). The phase
 there is the layer's strip screen, moved by frozen flow (any sub-sample shift),
-sampled by bilinear interpolation. The footprints of a regular pupil grid are
-an affine image of it on each strip, so a compiled kernel computes every tap
-and weight on the fly: nothing but the screens is read from memory.
+sampled by bilinear interpolation. The strips are sampled on the sky grid, so
+the footprint of a regular pupil grid is a scaled, shifted axis-aligned grid
+on each: the interpolation weights are separable and each grid line reads two
+contiguous screen lines.
 """
 
 from dataclasses import dataclass
@@ -38,58 +39,68 @@ _U = numba.uint64  # unsigned indices: no negative-index wraparound, faster gath
 
 
 @numba.njit(cache=True, fastmath=True, nogil=True)
-def _sample_kernel(screens, starts, strides, shifts, affine, row_start, row_end, layer_scale,
-                   out):  # pragma: no cover (jit)
-    """out[d, y, x] = sum_l scale[l] * bilinear(screen_l at the grid point's footprint),
-    for ``row_start[y] <= x < row_end[y]`` (zero elsewhere).
+def _sample_kernel(screens, starts, n_major, n_minor, skew, major_axis, u0, w0, beta, layer_scale,
+                   column_runs, column_ptr, row_runs, row_ptr, out, out_t):  # pragma: no cover (jit)
+    """out[d, y, x] = sum_l scale[l] * bilinear(screen_l at the footprint of grid point (y, x)).
 
-    ``affine[d, l]`` = (along0, across0, d_along/dx, d_across/dx, d_along/dy,
-    d_across/dy) in screen samples at t = 0; ``shifts[l]`` the frozen-flow shift
-    [samples along the wind] now. Per row, a first loop computes taps and
-    weights (vectorisable), a second gathers and blends. Footprints stay on the
-    screens (checked by the caller), so every index is non-negative.
+    On layer ``l`` the grid is axis-aligned: grid line ``a`` along the strip's
+    major axis lies at ``u = u0[d, l] + beta[d, l] a`` [samples], point ``b``
+    on it at minor ``w = w0[d, l] + beta[d, l] b``. Lines are grid rows (y)
+    when the major axis is y, else columns, accumulated transposed in
+    ``out_t``. Per line the two screen lines ``floor(u)`` and ``+1`` are
+    contiguous and the minor taps and weights are shared by all lines. Only the
+    mask's runs are computed: ``runs[ptr[a]:ptr[a + 1]]`` are the (start, end)
+    of line ``a``'s runs. Footprints stay on the screens (checked by the
+    caller), so every index is non-negative.
     """
-    n_dir, n_y, n_x = out.shape
-    tap = np.empty(n_x, np.uint64)
-    w_along = np.empty(n_x, np.float32)
-    w_across = np.empty(n_x, np.float32)
-    flat = out.reshape(-1)
-    flat[:] = 0.0
+    n_dir, n, _ = out.shape
+    tap = np.empty(n, np.uint64)
+    weight = np.empty(n, np.float32)
+    out[:] = 0.0
+    out_t[:] = 0.0
+    for l in range(starts.shape[0]):  # layer-major: footprints of one layer share cached screen lines
+        for d in range(n_dir):
+            if major_axis[l] == 1:
+                lines, runs, ptr = out[d], row_runs, row_ptr
+            else:
+                lines, runs, ptr = out_t[d], column_runs, column_ptr
+            first = np.floor(w0[d, l])  # minor coordinates may be negative before the line offset
+            for b in range(n):
+                w = w0[d, l] - first + beta[d, l] * b
+                j = np.uint64(w)
+                tap[b] = j
+                weight[b] = np.float32(w - j)
+            m, k, n_lines = n_minor[l], skew[l], n_major[l]
+            scale = np.float32(layer_scale[l])
+            for a in range(n):
+                if ptr[a + 1] == ptr[a]:
+                    continue
+                u = u0[d, l] + beta[d, l] * a
+                i = np.int64(u)
+                f = np.float32(u - i)
+                near = _U(starts[l] + i * m - (k * i) // n_lines + np.int64(first))
+                far = _U(starts[l] + (i + 1) * m - (k * (i + 1)) // n_lines + np.int64(first))
+                g_near = scale * (np.float32(1.0) - f)
+                g_far = scale * f
+                row = lines[a]
+                for r in range(ptr[a], ptr[a + 1]):
+                    for b in range(runs[r, 0], runs[r, 1]):
+                        t, c = tap[b], weight[b]
+                        s0, s1 = screens[near + t], screens[near + t + _U(1)]
+                        r0, r1 = screens[far + t], screens[far + t + _U(1)]
+                        row[b] += g_near * (s0 + c * (s1 - s0)) + g_far * (r0 + c * (r1 - r0))
     for d in range(n_dir):
-        for i_layer in range(starts.shape[0]):
-            origin = _U(starts[i_layer])
-            stride = _U(strides[i_layer])
-            scale = np.float32(layer_scale[i_layer])
-            a0 = affine[d, i_layer, 0] - shifts[i_layer]
-            c0, a_x, c_x = affine[d, i_layer, 1], affine[d, i_layer, 2], affine[d, i_layer, 3]
-            a_y, c_y = affine[d, i_layer, 4], affine[d, i_layer, 5]
-            for y in range(n_y):
-                row_a = a0 + y * a_y
-                row_c = c0 + y * c_y
-                for x in range(row_start[y], row_end[y]):
-                    along = row_a + x * a_x
-                    across = row_c + x * c_x
-                    i = np.uint64(along)
-                    j = np.uint64(across)
-                    w_along[x] = np.float32(along - i)
-                    w_across[x] = np.float32(across - j)
-                    tap[x] = origin + i * stride + j
-                base = _U((d * n_y + y) * n_x)
-                for x in range(row_start[y], row_end[y]):
-                    t = tap[x]
-                    s00, s01 = screens[t], screens[t + _U(1)]
-                    s10, s11 = screens[t + stride], screens[t + stride + _U(1)]
-                    low = s00 + w_across[x] * (s01 - s00)
-                    high = s10 + w_across[x] * (s11 - s10)
-                    flat[base + _U(x)] += scale * (low + w_along[x] * (high - low))
+        for y in range(n):
+            for x in range(n):
+                out[d, y, x] += out_t[d, x, y]
 
 
 @dataclass(frozen=True, eq=False)
 class ScreenSet:
     """Every layer's strip, flattened into one float32 buffer (possibly memory-mapped).
 
-    Layer ``l`` occupies ``flat[starts[l] : starts[l] + n_along * n_across]`` in
-    row-major (along, across) order.
+    Layer ``l`` occupies ``flat[starts[l] : starts[l] + n_major * n_minor]`` in
+    row-major (major, minor) order.
     """
 
     specs: tuple[StripSpec, ...]
@@ -98,23 +109,22 @@ class ScreenSet:
 
     @classmethod
     def from_screens(cls, specs, screens) -> "ScreenSet":
-        sizes = [s.n_along * s.n_across for s in specs]
+        sizes = [s.n_major * s.n_minor for s in specs]
         flat = np.concatenate([np.asarray(s, dtype=np.float32).ravel() for s in screens])
         return cls(tuple(specs), flat, np.concatenate([[0], np.cumsum(sizes)[:-1]]).astype(np.int64))
 
     def screen(self, layer: int) -> np.ndarray:
         s = self.specs[layer]
         start = self.starts[layer]
-        return self.flat[start:start + s.n_along * s.n_across].reshape(s.n_along, s.n_across)
+        return self.flat[start:start + s.n_major * s.n_minor].reshape(s.n_major, s.n_minor)
 
 
 class Propagator:
     """Samples the summed layer phases on a pupil grid for several lines of sight.
 
     ``grid`` (centred on ``centre_xy_m`` [m] in the pupil) is sampled for each
-    line of sight, where ``mask`` (n, n) is true (default: everywhere; the
-    samples of a row between its first and last true one are computed, others
-    are zero); ``screens`` holds the layers' strips.
+    line of sight, where ``mask`` (n, n) is true (default: everywhere; zero
+    elsewhere); ``screens`` holds the layers' strips.
     """
 
     def __init__(self, layers: list[Layer], screens: ScreenSet, lines_of_sight: list[LineOfSight],
@@ -123,52 +133,81 @@ class Propagator:
         if len(specs) != len(layers):
             raise ValueError(f"{len(layers)} layers but {len(specs)} screens")
         self.grid = grid
-        mask = np.ones((grid.n_pix, grid.n_pix), bool) if mask is None else np.asarray(mask, bool)
-        has = mask.any(axis=1)
-        self._row_start = np.where(has, mask.argmax(axis=1), 0).astype(np.int64)
-        self._row_end = np.where(has, grid.n_pix - mask[:, ::-1].argmax(axis=1), 0).astype(np.int64)
+        n = grid.n_pix
+        mask = np.ones((n, n), bool) if mask is None else np.asarray(mask, bool)
+        self._row_runs = _runs(mask)
+        self._column_runs = _runs(mask.T)
         self._screens = screens.flat
         self._starts = screens.starts
-        self._strides = np.array([s.n_across for s in specs], dtype=np.int64)
-        self._shift = np.array([s.shift_per_step for s in specs])
-        self._affine = np.empty((len(lines_of_sight), len(layers), 6))
-        first_row = np.full(len(layers), np.inf)
-        c = grid.coords_m
-        corners_x = centre_xy_m[0] + np.array([c[0], c[-1], c[0], c[-1]])
-        corners_y = centre_xy_m[1] + np.array([c[0], c[0], c[-1], c[-1]])
-        for d, los in enumerate(lines_of_sight):
-            for i_layer, (layer, spec) in enumerate(zip(layers, specs)):
-                origin = _screen_position(*footprint_m(corners_x[0], corners_y[0], layer.height_m, los), layer, spec)
-                step_x = _screen_position(*footprint_m(corners_x[0] + grid.dx_m, corners_y[0], layer.height_m, los),
-                                          layer, spec) - origin
-                step_y = _screen_position(*footprint_m(corners_x[0], corners_y[0] + grid.dx_m, layer.height_m, los),
-                                          layer, spec) - origin
-                self._affine[d, i_layer] = [origin[0], origin[1], step_x[0], step_x[1], step_y[0], step_y[1]]
-                along, across = _screen_position(*footprint_m(corners_x, corners_y, layer.height_m, los), layer, spec)
-                if (along.min() < 0 or along.max() + 1 >= spec.n_along or across.min() < 0
-                        or across.max() + 1 >= spec.n_across):
-                    raise ValueError(f"footprint at height {layer.height_m} m leaves its screen: "
-                                     "raise turbulence.field_radius_arcsec or shorten the case")
-                first_row[i_layer] = min(first_row[i_layer], along.min())
-        moving = self._shift > 0
-        self.n_steps_max = int(np.min(np.floor(first_row[moving] / self._shift[moving])) + 1) if moving.any() else 2**62
+        self._n_major = np.array([s.n_major for s in specs], dtype=np.int64)
+        self._n_minor = np.array([s.n_minor for s in specs], dtype=np.int64)
+        self._skew = np.array([s.skew for s in specs], dtype=np.int64)
+        self._major_axis = np.array([s.major_axis for s in specs], dtype=np.int64)
+        self._step = np.array([s.step_samples for s in specs])  # (layer, major/minor)
+        self._transposed = np.empty((len(lines_of_sight), n, n), dtype=np.float32)
+        shape = (len(lines_of_sight), len(layers))
+        self._u0, self._w0, self._beta = np.empty(shape), np.empty(shape), np.empty(shape)
+        self.n_steps_max = 2**62
         """Steps for which every footprint stays on its screen."""
+        first = grid.coords_m[0]
+        for d, los in enumerate(lines_of_sight):
+            for l, (layer, spec) in enumerate(zip(layers, specs)):
+                origin = np.array(footprint_m(centre_xy_m[0] + first, centre_xy_m[1] + first, layer.height_m, los))
+                scale = footprint_m(1.0, 1.0, layer.height_m, LineOfSight(0.0, 0.0, los.height_m))[0]
+                major = spec.major_axis
+                self._u0[d, l] = (origin[major] - spec.origin_m[0]) / spec.dx_m
+                self._w0[d, l] = (origin[1 - major] - spec.origin_m[1]) / spec.dx_m
+                self._beta[d, l] = scale * grid.dx_m / spec.dx_m
+                runs = self._column_runs if major == 0 else self._row_runs
+                self.n_steps_max = min(self.n_steps_max, self._steps_on_screen(spec, d, l, runs, layer))
 
-    def sample(self, step: int, layer_scale) -> np.ndarray:
-        """Phases (n_los, n, n) float32 on the grid at time step ``step``; layer ``l``
-        weighted by ``layer_scale[l]`` (e.g. r0^-5/6 sqrt(Cn2 fraction): rad at 500 nm)."""
+    def _steps_on_screen(self, spec, d, l, runs, layer) -> int:
+        """Steps before the footprint of (d, l) leaves its strip along the major axis;
+        ValueError if it does not fit across (checked at the first and last step:
+        the minor drift is linear up to whole-sample line offsets)."""
+        bounds, ptr = runs
+        used = np.flatnonzero(ptr[1:] > ptr[:-1])
+        lo, hi = bounds[ptr[used], 0], bounds[ptr[used + 1] - 1, 1]
+        u = self._u0[d, l] + self._beta[d, l] * used
+        speed = self._step[l, 0]
+        steps = 2**62
+        if speed > 0:
+            steps = int(np.floor(u.min() / speed)) + 1
+        elif speed < 0:
+            steps = int(np.floor((spec.n_major - 2 - u.max()) / -speed)) + 1
+        for step in {0, min(steps, 2**40) - 1}:
+            ui = np.floor(u - step * speed).astype(np.int64)
+            w_lo = self._w0[d, l] + self._beta[d, l] * lo - step * self._step[l, 1]
+            w_hi = self._w0[d, l] + self._beta[d, l] * (hi - 1) - step * self._step[l, 1]
+            offsets = np.stack([spec.line_offset(ui), spec.line_offset(ui + 1)])
+            if (ui.min() < 0 or ui.max() + 1 >= spec.n_major or np.floor(w_lo).min() - offsets.max() < 0
+                    or np.floor(w_hi).max() + 1 - offsets.min() >= spec.n_minor):
+                raise ValueError(f"footprint at height {layer.height_m} m leaves its screen: "
+                                 "raise turbulence.field_radius_arcsec or shorten the case")
+        return steps
+
+    def sample(self, step: int, layer_scale, out: np.ndarray | None = None) -> np.ndarray:
+        """Phases (n_los, n, n) float32 on the grid at time step ``step``, into
+        ``out`` if given; layer ``l`` weighted by ``layer_scale[l]`` (e.g.
+        r0^-5/6 sqrt(Cn2 fraction): rad at 500 nm)."""
         if not 0 <= step < self.n_steps_max:
             raise IndexError(f"step {step} outside the screens' {self.n_steps_max} steps")
-        n = self.grid.n_pix
-        out = np.empty((self._affine.shape[0], n, n), dtype=np.float32)
-        _sample_kernel(self._screens, self._starts, self._strides, step * self._shift, self._affine,
-                       self._row_start, self._row_end, np.asarray(layer_scale, dtype=np.float32), out)
+        if out is None:
+            n = self.grid.n_pix
+            out = np.empty((self._u0.shape[0], n, n), dtype=np.float32)
+        _sample_kernel(self._screens, self._starts, self._n_major, self._n_minor, self._skew, self._major_axis,
+                       self._u0 - step * self._step[:, 0], self._w0 - step * self._step[:, 1], self._beta,
+                       np.asarray(layer_scale, dtype=np.float32), *self._column_runs, *self._row_runs,
+                       out, self._transposed)
         return out
 
 
-def _screen_position(x_m, y_m, layer: Layer, spec: StripSpec) -> np.ndarray:
-    """(along, across) position [samples] on the layer's strip at t = 0 of sky points [m]."""
-    e = layer.wind_unit
-    along = (np.asarray(x_m) * e[0] + np.asarray(y_m) * e[1] - spec.origin_m[0]) / spec.dx_m
-    across = (-np.asarray(x_m) * e[1] + np.asarray(y_m) * e[0] - spec.origin_m[1]) / spec.dx_m
-    return np.array([along, across])
+def _runs(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Runs of true samples of each row of ``mask``: ``(runs, ptr)``, with row
+    ``a``'s (start, end) pairs in ``runs[ptr[a]:ptr[a + 1]]``."""
+    padded = np.pad(mask.astype(np.int8), ((0, 0), (1, 1)))
+    edges = np.diff(padded, axis=1)
+    rows_start, starts = np.nonzero(edges == 1)
+    _, ends = np.nonzero(edges == -1)
+    ptr = np.searchsorted(rows_start, np.arange(mask.shape[0] + 1)).astype(np.int64)
+    return np.stack([starts, ends], axis=1).astype(np.int64), ptr

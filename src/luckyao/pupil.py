@@ -8,6 +8,7 @@ even size has no sample on the optical axis.
 from dataclasses import dataclass
 from functools import cached_property
 
+import numba
 import numpy as np
 
 
@@ -75,11 +76,47 @@ class TiltRemover:
         basis, _ = self._projector
         return phase - self.coefficients(phase) @ basis.T
 
+    @cached_property
+    def _normal_inverse(self) -> np.ndarray:
+        basis = np.stack([np.ones_like(self.x_m), self.x_m, self.y_m], axis=1).astype(np.float64)
+        return np.linalg.inv(basis.T @ basis)
+
     def rms(self, phase: np.ndarray) -> np.ndarray:
-        """Tilt-removed rms over the pupil samples, shape (...)."""
-        return np.sqrt(np.mean(self.residual(phase) ** 2, axis=-1))
+        """Tilt-removed rms over the pupil samples, shape (...).
+
+        The residual is orthogonal to the basis, so ``|phi - B c|^2 = |phi|^2 -
+        b^T (B^T B)^-1 b`` with ``b = B^T phi``: one compiled pass over the
+        samples, accumulated in float64.
+        """
+        phase = np.asarray(phase, dtype=np.float32)
+        flat = np.ascontiguousarray(phase.reshape(-1, phase.shape[-1]))
+        out = np.empty(flat.shape[0])
+        _tilt_removed_rms(flat, np.asarray(self.x_m, np.float64), np.asarray(self.y_m, np.float64),
+                          self._normal_inverse, out)
+        return out.reshape(phase.shape[:-1])
 
     @classmethod
     def for_mask(cls, grid: PupilGrid, mask: np.ndarray) -> "TiltRemover":
         x, y = grid.xy_m
         return cls(x_m=x[mask], y_m=y[mask])
+
+
+@numba.njit(cache=True, nogil=True)
+def _tilt_removed_rms(phase, x_m, y_m, normal_inverse, out):  # pragma: no cover (jit)
+    """out[k] = sqrt((|phi_k|^2 - b^T (B^T B)^-1 b) / n), b = (sum phi, sum x phi, sum y phi)."""
+    n = phase.shape[1]
+    b = np.empty(3)
+    for k in range(phase.shape[0]):
+        s0 = sx = sy = power = 0.0
+        for i in range(n):
+            v = np.float64(phase[k, i])
+            s0 += v
+            sx += x_m[i] * v
+            sy += y_m[i] * v
+            power += v * v
+        b[0], b[1], b[2] = s0, sx, sy
+        fitted = 0.0
+        for i in range(3):
+            for j in range(3):
+                fitted += b[i] * normal_inverse[i, j] * b[j]
+        out[k] = np.sqrt(max(power - fitted, 0.0) / n)

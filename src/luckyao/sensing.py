@@ -62,8 +62,8 @@ class LgsSensing:
         """Sample the beacons' down- and uplink phases at ``step`` into the exposure;
         True when that completes the exposure."""
         k = step % self.exposure_steps
-        self._down_buffer[k] = self._down.sample(step, layer_scale)
-        self._up_buffer[k] = self._up.sample(step, layer_scale)
+        self._down.sample(step, layer_scale, out=self._down_buffer[k])
+        self._up.sample(step, layer_scale, out=self._up_buffer[k])
         return k == self.exposure_steps - 1
 
     def slopes(self) -> np.ndarray:

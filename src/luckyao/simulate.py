@@ -87,19 +87,19 @@ def simulate(system: System, screens: ScreenSet, write_frames, sensing: LgsSensi
     lgs_rms = np.full((n_targets, n_frames), np.nan, dtype=np.float32)
     progress = Progress("frames", n_frames)
     buffer = np.empty((n_targets, block_frames, n_pix, n_pix), dtype=np.float32)
+    intensity = np.empty((n_targets, imager.fft_size, imager.fft_size), dtype=np.float32)
     for start in range(0, n_frames, block_frames):
         count = min(block_frames, n_frames - start)
         for j in range(count):
             frame = start + j
-            intensity = None
+            intensity.fill(0.0)
             rms2 = np.zeros(n_targets)
             exposures = []
             for s in range(spf):
                 step = frame * spf + s
                 layer_scale = system.layer_scale(step)
                 phase_500 = propagator.sample(step, layer_scale)[:, mask]
-                image = imager.intensity(phase_500 * to_camera)
-                intensity = image if intensity is None else intensity + image
+                imager.accumulate(phase_500 * to_camera, intensity)
                 rms2 += tilt.rms(phase_500) ** 2
                 if sensing is not None:
                     exposure_rms = sensing.step(step, layer_scale)

@@ -26,8 +26,7 @@ with axis 1 = (x, y) [rad]; images ``(n_beacons, n_valid, n_pixels, n_pixels)``.
 """
 
 from dataclasses import dataclass
-from functools import cached_property, lru_cache
-from types import SimpleNamespace
+from functools import cached_property
 
 import numba
 import numpy as np
@@ -36,6 +35,7 @@ import scipy.fft
 from .lgs import LgsConfig, altitude_limits_m, altitude_profile, elongation_offsets_rad
 from .pupil import PupilGrid, Telescope
 from .units import ARCSEC_RAD
+from .wfs_kernel import centroids, exposure_kernel, lane_otf, uplink_kernel
 
 
 @dataclass(frozen=True, eq=False)
@@ -275,7 +275,7 @@ def elongation_otf(wfs: ShackHartmann, offsets_rad: np.ndarray, weights: np.ndar
 
 
 def lgs_elongation_otf(wfs: ShackHartmann, config: LgsConfig) -> np.ndarray:
-    """Static elongation OTF (n_valid, M, M//2+1) for an LGS asterism.
+    """Static elongation OTF (n_valid, M, M//2+1), read-only, for an LGS asterism.
 
     Altitudes are sampled finely enough that adjacent points are < 1/8 of an
     FFT sample apart on the sky (see :func:`luckyao.lgs.altitude_profile`).
@@ -288,7 +288,9 @@ def lgs_elongation_otf(wfs: ShackHartmann, config: LgsConfig) -> np.ndarray:
     z_m, weights = altitude_profile(config, n_z)
     offsets = elongation_offsets_rad(wfs.subaperture_xy_m, config.launch_xy_m,
                                      config.height_m, z_m)
-    return elongation_otf(wfs, offsets, weights)
+    otf = elongation_otf(wfs, offsets, weights)
+    otf.flags.writeable = False  # static: exposure_images keeps its lane layout
+    return otf
 
 
 def uplink_otf(wfs: ShackHartmann, uplink_phase_rad: np.ndarray,
@@ -330,21 +332,8 @@ def pixel_images(wfs: ShackHartmann, spectra: np.ndarray) -> np.ndarray:
     return np.matmul(np.matmul(e_y, spectra), e_x.T).real.astype(np.float32)
 
 
-# --- fused exposure kernel ------------------------------------------------------
-# Sub-apertures are processed in "lanes": blocks of _LANES of them (one beacon
-# each) are stored innermost (..., _LANES) so that every FFT butterfly, power
-# accumulation and OTF product is one SIMD loop over the lanes; the pixel
-# integration is then two complex matrix products (BLAS) for all of them.
-# The 2-D transforms are radix-2 on N = 2^k >= 2 n_in samples (N may differ
-# from ``fft_size``: the Fourier coefficients of the intensity are those of
-# the autocorrelation of the field, independent of the padding as long as
-# N >= 2 n_in). The forward transform is decimation in frequency (natural in,
-# bit-reversed out), the intensity transform decimation in time (bit-reversed
-# in, natural out), so no bit reversal is ever done; the zero-padded half of
-# the field is pruned (the first DIF stage is a copy and a twiddle), and only
-# the p = 0..N/2-1 half-plane of the intensity spectrum is computed.
-# 48 lanes: long enough SIMD loops (16 were ~2x slower) and no padding for the
-# 8x8 WFS (48 valid sub-apertures).
+# --- fused exposure (compiled in luckyao.wfs_kernel) ----------------------------------
+# 48 sub-apertures per chunk (a multiple of 8): no padding for the 8x8 WFS (48 valid).
 _LANES = 48
 
 
@@ -352,350 +341,80 @@ def _next_pow2(n: int) -> int:
     return 1 << max(1, int(n - 1).bit_length())
 
 
-def _twiddles(n_fft: int) -> tuple[np.ndarray, np.ndarray]:
-    w = np.exp(-2j * np.pi * np.arange(n_fft // 2) / n_fft)
-    return w.real.astype(np.float32), w.imag.astype(np.float32)
-
-
-# The kernels work on flat float32 buffers with unsigned offsets and are
-# compiled per transform size (``n_fft``, ``n_in`` and the twiddles are
-# compile-time constants): that is what lets LLVM vectorise the lane loops
-# (signed 2-D indexing or a run-time size keeps them scalar, 5-8x slower).
-_U = numba.uint64
-
-
-@lru_cache(maxsize=None)
-def _lane_kernels(n_fft: int, n_in: int, lanes: int) -> SimpleNamespace:
-    """JIT kernels for transforms of ``n_fft`` (power of 2) samples of ``n_in``
-    inputs, ``lanes`` sub-apertures at a time."""
-    half = n_fft // 2
-    n_rows = max(n_in, half)
-    block = n_in * n_in * lanes
-    tw_re, tw_im = _twiddles(n_fft)
-    assert n_in <= half and n_fft >= 4
-
-    @numba.njit(nogil=True, inline="always")
-    def dif(re, im):  # pragma: no cover (jit)
-        """In-place radix-2 DIF stages N/4, .., 1 (the N/2 stage is in load_padded)."""
-        h = half // 2
-        while h >= 1:
-            step = n_fft // (2 * h)
-            for start in range(0, n_fft, 2 * h):
-                for k in range(h):
-                    wr = tw_re[k * step]
-                    wi = tw_im[k * step]
-                    o0 = _U((start + k) * lanes)
-                    o1 = _U((start + k + h) * lanes)
-                    for lane in range(lanes):
-                        ar = re[o0 + lane]
-                        ai = im[o0 + lane]
-                        br = re[o1 + lane]
-                        bi = im[o1 + lane]
-                        re[o0 + lane] = ar + br
-                        im[o0 + lane] = ai + bi
-                        dr = ar - br
-                        di = ai - bi
-                        re[o1 + lane] = dr * wr - di * wi
-                        im[o1 + lane] = dr * wi + di * wr
-            h //= 2
-
-    @numba.njit(nogil=True, inline="always")
-    def butterfly(re, im, o0, o1, wr, wi):  # pragma: no cover (jit)
-        """One radix-2 DIT butterfly on every lane: (a, b) -> (a + w b, a - w b)."""
-        for lane in range(lanes):
-            br = re[o1 + lane]
-            bi = im[o1 + lane]
-            tr = br * wr - bi * wi
-            ti = br * wi + bi * wr
-            ar = re[o0 + lane]
-            ai = im[o0 + lane]
-            re[o0 + lane] = ar + tr
-            im[o0 + lane] = ai + ti
-            re[o1 + lane] = ar - tr
-            im[o1 + lane] = ai - ti
-
-    @numba.njit(nogil=True, inline="always")
-    def dit(re, im, lower_half_only):  # pragma: no cover (jit)
-        """In-place radix-2 DIT (bit-reversed in, natural out); with
-        ``lower_half_only`` the last stage only writes outputs 0..N/2-1."""
-        h = 1
-        while h < half:
-            step = n_fft // (2 * h)
-            for start in range(0, n_fft, 2 * h):
-                for k in range(h):
-                    wr = tw_re[k * step]
-                    wi = tw_im[k * step]
-                    o0 = _U((start + k) * lanes)
-                    o1 = _U((start + k + h) * lanes)
-                    butterfly(re, im, o0, o1, wr, wi)
-            h *= 2
-        for k in range(half):
-            wr = tw_re[k]
-            wi = tw_im[k]
-            o0 = _U(k * lanes)
-            o1 = _U((k + half) * lanes)
-            if lower_half_only:
-                for lane in range(lanes):
-                    br = re[o1 + lane]
-                    bi = im[o1 + lane]
-                    re[o0 + lane] += br * wr - bi * wi
-                    im[o0 + lane] += br * wi + bi * wr
-            else:
-                butterfly(re, im, o0, o1, wr, wi)
-
-    @numba.njit(nogil=True, inline="always")
-    def load_padded(src_re, src_im, src_offset, src_stride, re, im):  # pragma: no cover
-        """First DIF stage of a zero-padded input: buffer rows y and y + N/2 from
-        the ``n_in`` source rows at ``src_offset + y src_stride``."""
-        for y in range(n_in):
-            wr = tw_re[y]
-            wi = tw_im[y]
-            s = _U(src_offset + y * src_stride)
-            o0 = _U(y * lanes)
-            o1 = _U((y + half) * lanes)
-            for lane in range(lanes):
-                fr = src_re[s + lane]
-                fi = src_im[s + lane]
-                re[o0 + lane] = fr
-                im[o0 + lane] = fi
-                re[o1 + lane] = fr * wr - fi * wi
-                im[o1 + lane] = fr * wi + fi * wr
-        for y in range(n_in, half):
-            o0 = _U(y * lanes)
-            o1 = _U((y + half) * lanes)
-            for lane in range(lanes):
-                re[o0 + lane] = 0.0
-                im[o0 + lane] = 0.0
-                re[o1 + lane] = 0.0
-                im[o1 + lane] = 0.0
-
-    @numba.njit(nogil=True)
-    def buffers():  # pragma: no cover (jit)
-        return (np.empty(n_in * lanes, np.float32), np.empty(n_in * lanes, np.float32),
-                np.empty(n_fft * lanes, np.float32), np.empty(n_fft * lanes, np.float32),
-                np.empty(n_fft * n_rows * lanes, np.float32),
-                np.empty(n_fft * n_rows * lanes, np.float32),
-                np.empty(n_fft * n_fft * lanes, np.float32))
-
-    @numba.njit(nogil=True)
-    def chunk_spectrum(cos_p, sin_p, amp, n_steps, n_chunks, chunk, amp_chunk, work,
-                       otf, otf_chunk, spot, beacon, c):  # pragma: no cover (jit)
-        """Half-plane spectrum of sum_t |FFT(amp exp(i phi_t))|^2 times the spot OTF.
-
-        Flat inputs: ``cos_p``/``sin_p`` (T, n_chunks, n_in, n_in, L) [y, x],
-        ``amp`` (n_amp, n_in, n_in, L). Writes
-        ``c[q, chunk, p, lane] = C[q, p, lane] otf[q, otf_chunk, p, lane] spot[beacon, q, p]``
-        (complex64, c (N, n_chunks, N/2, L), otf (N, n_otf, N/2, L), spot
-        (n_b, N, N/2)) with C = N^2 x the autocorrelation of the field.
-        """
-        col_re, col_im, buf_re, buf_im, rows_re, rows_im, power = work
-        n_otf = otf.size // (n_fft * half * lanes)
-        for i in range(n_fft * n_fft * lanes):
-            power[i] = 0.0
-        a0 = _U(amp_chunk * block)
-        for t in range(n_steps):
-            f0 = _U((t * n_chunks + chunk) * block)
-            # y transform of the n_in non-zero columns (bit-reversed ky)
-            for x in range(n_in):
-                for y in range(n_in):
-                    o = _U((y * n_in + x) * lanes)
-                    d = _U(y * lanes)
-                    for lane in range(lanes):
-                        a = amp[a0 + o + lane]
-                        col_re[d + lane] = a * cos_p[f0 + o + lane]
-                        col_im[d + lane] = a * sin_p[f0 + o + lane]
-                load_padded(col_re, col_im, 0, lanes, buf_re, buf_im)
-                dif(buf_re, buf_im)
-                for ky in range(n_fft):
-                    o = _U((ky * n_rows + x) * lanes)
-                    d = _U(ky * lanes)
-                    for lane in range(lanes):
-                        rows_re[o + lane] = buf_re[d + lane]
-                        rows_im[o + lane] = buf_im[d + lane]
-            # x transform of every row, |.|^2 accumulated (bit-reversed ky, kx)
-            for ky in range(n_fft):
-                load_padded(rows_re, rows_im, ky * n_rows * lanes, lanes, buf_re, buf_im)
-                dif(buf_re, buf_im)
-                o = _U(ky * n_fft * lanes)
-                for i in range(n_fft * lanes):
-                    power[o + i] += buf_re[i] * buf_re[i] + buf_im[i] * buf_im[i]
-        # forward DFT of the (real) intensity: x (p < N/2 only), then y
-        for ky in range(n_fft):
-            o = _U(ky * n_fft * lanes)
-            for i in range(n_fft * lanes):
-                buf_re[i] = power[o + i]
-                buf_im[i] = 0.0
-            dit(buf_re, buf_im, True)
-            o = _U(ky * n_rows * lanes)
-            for i in range(half * lanes):
-                rows_re[o + i] = buf_re[i]
-                rows_im[o + i] = buf_im[i]
-        for p in range(half):
-            for ky in range(n_fft):
-                o = _U((ky * n_rows + p) * lanes)
-                d = _U(ky * lanes)
-                for lane in range(lanes):
-                    buf_re[d + lane] = rows_re[o + lane]
-                    buf_im[d + lane] = rows_im[o + lane]
-            dit(buf_re, buf_im, False)
-            for q in range(n_fft):
-                o = _U(((q * n_chunks + chunk) * half + p) * lanes)
-                g = _U(((q * n_otf + otf_chunk) * half + p) * lanes)
-                s = spot[(beacon * n_fft + q) * half + p]
-                d = _U(q * lanes)
-                for lane in range(lanes):
-                    c[o + lane] = complex(buf_re[d + lane], buf_im[d + lane]) * (otf[g + lane] * s)
-
-    @numba.njit(nogil=True)
-    def spectra(cos_p, sin_p, amp, n_steps, n_chunks, otf, spot, out):  # pragma: no cover
-        """Spectra x OTFs (N, n_chunks, N/2, L) complex64 of every chunk (see
-        chunk_spectrum); chunk ``c`` uses amplitude and ``otf`` block ``c % n_amp``
-        and the ``spot`` of beacon ``c // n_amp``."""
-        work = buffers()
-        n_amp = amp.size // block
-        for chunk in range(n_chunks):
-            chunk_spectrum(cos_p, sin_p, amp, n_steps, n_chunks, chunk, chunk % n_amp, work,
-                           otf, chunk % n_amp, spot, chunk // n_amp, out)
-
-    return SimpleNamespace(spectra=spectra)
-
-
-@numba.njit(nogil=True)
-def _gather_phase(phase, n_b, n, beacon, offset_y, offset_x, ratio, n_steps, n_chunks, n_in,
-                  lanes, out):  # pragma: no cover (jit)
-    """out[t, c, y, x, l] = ratio * phase[t, beacon[c, l], oy[c, l] + y, ox[c, l] + x] (flat)."""
-    for t in range(n_steps):
-        for c in range(n_chunks):
-            for lane in range(lanes):
-                b = beacon[c * lanes + lane]
-                src0 = ((t * n_b + b) * n + offset_y[c * lanes + lane]) * n \
-                    + offset_x[c * lanes + lane]
-                dst0 = (t * n_chunks + c) * n_in * n_in * lanes + lane
-                for y in range(n_in):
-                    s = _U(src0 + y * n)
-                    d = _U(dst0 + y * n_in * lanes)
-                    for x in range(n_in):
-                        out[d + _U(x * lanes)] = ratio * phase[s + _U(x)]
-
-
-@numba.njit(nogil=True)
-def _gather_elongation(elongation, q_index, n_p, out):  # pragma: no cover (jit)
-    """out[i, v // L, p, v % L] = elongation[v, q_index[i], p] (0 where q_index < 0,
-    p >= n_p or v padded); ``out`` (N, chunks_per_beacon, N/2, L) complex64."""
-    n_v = elongation.shape[0]
-    lanes = out.shape[3]
-    out[:] = 0.0
-    for v in range(n_v):
-        for i in range(q_index.size):
-            if q_index[i] >= 0:
-                for p in range(n_p):
-                    out[i, v // lanes, p, v % lanes] = elongation[v, q_index[i], p]
-
-
-@dataclass(frozen=True, eq=False)
-class _LanePlan:
-    """Static lane layout of one source (downlink sub-apertures or launch apertures)."""
-
-    n_in: int
-    n_fft: int
-    lanes: int
-    beacon: np.ndarray      # (n_chunks, L) int64
-    offset_y: np.ndarray    # (n_chunks, L) int64
-    offset_x: np.ndarray    # (n_chunks, L) int64
-    amp: np.ndarray         # (n_amp, n_in, n_in, L) float32
-    chunks_per_beacon: int
-
-    @property
-    def n_chunks(self) -> int:
-        return self.beacon.shape[0]
-
-    def trig(self, phase: np.ndarray, ratio: float) -> tuple[np.ndarray, np.ndarray]:
-        """cos and sin (T, n_chunks, n_in, n_in, L) float32 of the gathered phases."""
-        n_steps, n_b, n, _ = phase.shape
-        lanes = np.empty(n_steps * self.n_chunks * self.n_in * self.n_in * self.lanes,
-                         dtype=np.float32)
-        _gather_phase(phase.reshape(-1), n_b, n, self.beacon.reshape(-1),
-                      self.offset_y.reshape(-1), self.offset_x.reshape(-1), np.float32(ratio),
-                      n_steps, self.n_chunks, self.n_in, self.lanes, lanes)
-        return np.cos(lanes), np.sin(lanes, out=lanes)
-
-
-def _downlink_plan(wfs: ShackHartmann, n_beacons: int) -> _LanePlan:
-    lanes = _LANES
-    n_s = wfs.samples_per_subaperture
-    n_v = wfs.n_valid
-    per_beacon = -(-n_v // lanes)
-    v = np.arange(per_beacon * lanes)
-    index = wfs.subaperture_index[np.minimum(v, n_v - 1)]
-    offset_y = np.tile((index[:, 0] * n_s).reshape(per_beacon, lanes), (n_beacons, 1))
-    offset_x = np.tile((index[:, 1] * n_s).reshape(per_beacon, lanes), (n_beacons, 1))
-    beacon = np.repeat(np.arange(n_beacons), per_beacon)[:, None] * np.ones(lanes, np.int64)
-    amp = np.zeros((per_beacon * lanes, n_s, n_s), dtype=np.float32)
-    amp[:n_v] = wfs.amplitude
-    amp = np.ascontiguousarray(amp.reshape(per_beacon, lanes, n_s, n_s).transpose(0, 2, 3, 1))
-    n_fft = _next_pow2(2 * n_s)
-    return _LanePlan(n_s, n_fft, lanes, beacon.astype(np.int64),
-                     offset_y.astype(np.int64), offset_x.astype(np.int64), amp, per_beacon)
-
-
-def _signed_harmonics(n_fft: int) -> np.ndarray:
-    """Integer harmonic of each natural-order DFT index (fftfreq order)."""
-    return np.fft.fftfreq(n_fft, 1.0 / n_fft).round().astype(np.int64)
-
-
 @dataclass(frozen=True, eq=False)
 class _ExposurePlan:
-    down: _LanePlan
-    q_index: np.ndarray     # (N,) index of each internal harmonic on the fft_size grid, -1 if none
-    ey: np.ndarray          # (n_pix, N) complex64 pixel integrals E_y on the internal grid
-    ex: np.ndarray          # (n_pix, N/2) complex64 weighted E_x
-    no_elongation: np.ndarray  # (N, chunks_per_beacon, N/2, L) complex64 unit OTF
+    """Static layout of :func:`exposure_images` for one WFS, beacon count and
+    number of uplink steps (0: point-like spot).
+
+    Chunk ``b n_amp + a`` holds the sub-apertures ``lane_subaperture[a]`` (-1:
+    padding) of beacon ``b``; ``n_lags`` bounds the harmonics (see
+    :mod:`luckyao.wfs_kernel`).
+    """
+
+    exposure: object              # luckyao.wfs_kernel.exposure_kernel(...)
+    uplink_otf: object            # luckyao.wfs_kernel.uplink_kernel(...)
+    n_fft: int
+    n_lags: int
+    sources: np.ndarray           # (n_chunks, L) int64 offset of each lane's block in one step
+    amp: np.ndarray               # (n_amp, n_s n_s L) float32 transmission [x, y, lane]
+    lane_subaperture: np.ndarray  # (n_amp, L) int64
+    q_index: np.ndarray           # (n_q,) int64 harmonic q = -(n_lags - 1) .. n_lags - 1, mod M
+    point_line: np.ndarray        # (n_amp, 2, n_q, n_lags, L) float32 lane OTF 1 (no elongation)
+    ey: np.ndarray                # (n_pix, n_q) complex64 pixel integrals E_y
+    ex: np.ndarray                # (n_pix, n_lags) complex64 weighted E_x
+    point_spot: np.ndarray        # (n_beacons, n_q, n_lags) complex64 ones (no uplink)
+    launch_amp: np.ndarray        # (n_l n_l lanes,) float32 launch mask [x, y, (t, beacon)]
+    elongation_cache: dict        # "otf": (last read-only elongation OTF, its lane layout)
 
 
-def _exposure_plan(wfs: ShackHartmann, n_beacons: int) -> _ExposurePlan:
+def _exposure_plan(wfs: ShackHartmann, n_beacons: int, uplink_steps: int) -> _ExposurePlan:
     plans = wfs.__dict__.setdefault("_exposure_plans", {})
-    if n_beacons in plans:
-        return plans[n_beacons]
-    down = _downlink_plan(wfs, n_beacons)
-    m = wfs.fft_size
-    n_fft, half = down.n_fft, down.n_fft // 2
-    q = _signed_harmonics(n_fft)
-    inside = (q > -m / 2) & (q < m / 2)
-    q_index = np.where(inside, q % m, -1)
+    if (n_beacons, uplink_steps) in plans:
+        return plans[n_beacons, uplink_steps]
+    lanes, n_s, n_v, n = _LANES, wfs.samples_per_subaperture, wfs.n_valid, wfs.grid.n_pix
+    n_amp = -(-n_v // lanes)
+    v = np.arange(n_amp * lanes)
+    index = wfs.subaperture_index[np.minimum(v, n_v - 1)]
+    offset = (index[:, 0] * n_s * n + index[:, 1] * n_s).reshape(n_amp, lanes)
+    sources = (np.arange(n_beacons)[:, None, None] * n * n + offset).reshape(-1, lanes)
+    amp = np.zeros((n_amp * lanes, n_s, n_s), dtype=np.float32)
+    amp[:n_v] = wfs.amplitude
+    amp = amp.reshape(n_amp, lanes, n_s, n_s).transpose(0, 3, 2, 1).reshape(n_amp, -1)
+    n_launch = wfs.launch_grid.n_pix
+    n_lags = min(n_s, n_launch) if uplink_steps else n_s
+    q = np.arange(1 - n_lags, n_lags)
     e_y, e_x = wfs._pixel_integrals
-    ey = np.where(inside[None, :], e_y[:, np.where(inside, q % m, 0)], 0)
-    ex = np.zeros((wfs.n_pixels, half), dtype=np.complex64)
-    n_p = min(half, m // 2 + 1)
-    ex[:, :n_p] = e_x[:, :n_p]
-    no_elongation = np.ones((n_fft, down.chunks_per_beacon, half, down.lanes), np.complex64)
-    plan = _ExposurePlan(down, q_index.astype(np.int64), ey.astype(np.complex64),
-                         ex.astype(np.complex64), no_elongation)
-    plans[n_beacons] = plan
+    ey, ex = e_y[:, q % wfs.fft_size], e_x[:, :n_lags]
+    n_fft = _next_pow2(2 * n_s)
+    n_fields = uplink_steps * n_beacons
+    launch_amp = np.zeros((n_launch, n_launch, max(16, -(-n_fields // 8) * 8)), dtype=np.float32)
+    launch_amp[:, :, :n_fields] = wfs.launch_mask.T[:, :, None]
+    point_line = np.zeros((n_amp, 2, q.size, n_lags, lanes), dtype=np.float32)
+    point_line[:, 0] = 1.0
+    plan = _ExposurePlan(
+        exposure_kernel(n_fft, n_s, lanes, n_lags, wfs.n_pixels),
+        uplink_kernel(_next_pow2(2 * n_launch), n_launch, uplink_steps, n_beacons, n_lags)
+        if uplink_steps else None,
+        n_fft, n_lags, sources.astype(np.int64), np.ascontiguousarray(amp),
+        np.where(v < n_v, v, -1).reshape(n_amp, lanes), q % wfs.fft_size, point_line,
+        np.ascontiguousarray(ey), np.ascontiguousarray(ex),
+        np.ones((n_beacons, q.size, n_lags), dtype=np.complex64), launch_amp.reshape(-1), {})
+    plans[n_beacons, uplink_steps] = plan
     return plan
 
 
-def _exposure_uplink_otf(wfs: ShackHartmann, plan: _ExposurePlan, uplink: np.ndarray,
-                         ratio: float) -> np.ndarray:
-    """Exposure-mean uplink OTF (n_beacons, N, N/2) complex64 on the downlink harmonics.
-
-    As :func:`uplink_otf`, but the steps' spots are summed before the single
-    transform and the sum normalised to unit flux: the mean of the steps'
-    unit-flux OTFs, since every step's spot has the same flux (Parseval,
-    phase-only changes).
-    """
-    m = wfs.fft_size
-    phase = uplink * np.float32(ratio)
-    field = wfs.launch_mask * (np.cos(phase) + 1j * np.sin(phase)).astype(np.complex64)
-    spectrum = scipy.fft.fft2(field, s=(m, m), overwrite_x=True)
-    spot = spectrum.real**2 + spectrum.imag**2
-    otf = scipy.fft.rfft2(spot.sum(axis=0))
-    otf /= otf[:, :1, :1].real
-    n_fft, half = plan.down.n_fft, plan.down.n_fft // 2
-    out = np.zeros((otf.shape[0], n_fft, half), dtype=np.complex64)
-    n_p = min(half, m // 2 + 1)
-    rows = plan.q_index >= 0
-    out[:, rows, :n_p] = otf[:, plan.q_index[rows], :n_p]
-    return out
+def _lane_elongation(plan: _ExposurePlan, elongation: np.ndarray) -> np.ndarray:
+    """``elongation`` in the lane layout of ``plan`` (see ``wfs_kernel.lane_otf``); kept
+    for the next call when read-only (as from :func:`lgs_elongation_otf`)."""
+    cached = plan.elongation_cache.get("otf")
+    if cached is not None and cached[0] is elongation:
+        return cached[1]
+    lanes = np.empty_like(plan.point_line)
+    lane_otf(np.asarray(elongation, dtype=np.complex64), plan.q_index, plan.n_lags,
+             plan.lane_subaperture, lanes)
+    if not elongation.flags.writeable:
+        plan.elongation_cache["otf"] = (elongation, lanes)
+    return lanes
 
 
 def exposure_images(wfs: ShackHartmann, downlink_phase_rad: np.ndarray,
@@ -719,48 +438,32 @@ def exposure_images(wfs: ShackHartmann, downlink_phase_rad: np.ndarray,
 
     Same result (to float32 rounding) as :func:`reference_exposure_images`,
     which chains :func:`intensity_samples`, :func:`intensity_spectra`,
-    :func:`uplink_otf` and :func:`pixel_images`; here all steps, beacons and
-    sub-apertures go through one fused, SIMD-vectorised kernel (see
-    ``_lane_kernels``): pruned radix-2 FFTs of the fields, the steps'
-    intensities summed before their single spectrum, the spot OTFs applied to
-    the half-plane harmonics only; then the pixel integration is two complex
-    matrix products for all sub-apertures at once.
+    :func:`uplink_otf` and :func:`pixel_images`; here compiled kernels
+    (:mod:`luckyao.wfs_kernel`) get the exposure spectra as field
+    autocorrelations, only on the harmonics where the spot OTFs are non-zero.
     """
     downlink = np.ascontiguousarray(downlink_phase_rad, dtype=np.float32)
-    if downlink.ndim != 4:
+    if downlink.ndim != 4 or downlink.shape[2:] != (wfs.grid.n_pix,) * 2:
         raise ValueError("downlink phase must be (T, n_beacons, n, n)")
     n_steps, n_beacons = downlink.shape[:2]
-    plan = _exposure_plan(wfs, n_beacons)
-    down = plan.down
-    n_fft, half = down.n_fft, down.n_fft // 2
-    ratio = phase_wavelength_m / wfs.wavelength_m
-    cos_p, sin_p = down.trig(downlink, ratio)
-    if elongation is None:
-        el = plan.no_elongation
+    uplink = None if uplink_phase_rad is None else np.ascontiguousarray(uplink_phase_rad,
+                                                                         dtype=np.float32)
+    plan = _exposure_plan(wfs, n_beacons, 0 if uplink is None else uplink.shape[0])
+    ratio = np.float32(phase_wavelength_m / wfs.wavelength_m)
+    if uplink is None:
+        spot = plan.point_spot
     else:
-        el = np.empty_like(plan.no_elongation)
-        _gather_elongation(np.ascontiguousarray(elongation, dtype=np.complex64), plan.q_index,
-                           min(half, wfs.fft_size // 2 + 1), el)
-    spot = np.full((n_beacons, n_fft, half), 1.0 / (n_fft**2 * wfs.samples_per_subaperture**2
-                                                     * n_steps), dtype=np.complex64)
-    if uplink_phase_rad is not None:
-        uplink = np.ascontiguousarray(uplink_phase_rad, dtype=np.float32)
-        if uplink.ndim != 4:
+        n_launch = wfs.launch_grid.n_pix
+        if uplink.shape[1:] != (n_beacons, n_launch, n_launch):
             raise ValueError("uplink phase must be (T, n_beacons, n_l, n_l)")
-        spot *= _exposure_uplink_otf(wfs, plan, uplink, ratio)
-    # one spectrum per exposure (the steps' intensities summed) times the spot
-    # OTFs (elongation x uplink x normalisation), then the pixel integrals
-    lanes = down.lanes
-    spectra = np.empty((n_fft, down.n_chunks * half * lanes), np.complex64)
-    _lane_kernels(n_fft, down.n_in, lanes).spectra(cos_p, sin_p, down.amp.reshape(-1), n_steps,
-                                                   down.n_chunks, el.reshape(-1),
-                                                   spot.reshape(-1), spectra.reshape(-1))
-    rows = (plan.ey @ spectra).reshape(wfs.n_pixels * down.n_chunks, half, lanes)
-    pixels = np.matmul(plan.ex, rows).real  # (y, chunk, x, lane)
-    pixels = pixels.reshape(wfs.n_pixels, down.n_chunks, wfs.n_pixels, lanes).transpose(1, 0, 2, 3)
-    p = wfs.n_pixels
-    images = pixels.reshape(n_beacons, -1, p, p, lanes).transpose(0, 1, 4, 2, 3)
-    return np.ascontiguousarray(images.reshape(n_beacons, -1, p, p)[:, :wfs.n_valid])
+        spot = np.empty_like(plan.point_spot)
+        plan.uplink_otf(uplink.reshape(-1), ratio, plan.launch_amp, spot)
+    el = plan.point_line if elongation is None else _lane_elongation(plan, elongation)
+    norm = np.float32(1.0 / (plan.n_fft * wfs.samples_per_subaperture**2 * n_steps))
+    images = np.empty((n_beacons, wfs.n_valid, wfs.n_pixels, wfs.n_pixels), dtype=np.float32)
+    plan.exposure(downlink.reshape(-1), n_steps, wfs.grid.n_pix, ratio, norm, plan.sources,
+                  plan.amp, plan.lane_subaperture, el, spot, plan.ey, plan.ex, images)
+    return images
 
 
 def reference_exposure_images(wfs: ShackHartmann, downlink_phase_rad: np.ndarray,
@@ -799,19 +502,13 @@ def add_noise(images: np.ndarray, photons_per_subaperture: float, read_noise_e: 
     return noisy / np.float32(photons_per_subaperture)
 
 
-def centroids_rad(wfs: ShackHartmann, images: np.ndarray) -> np.ndarray:
-    """Centre of gravity (n_beacons, 2, n_valid) [rad] of images (n_b, n_valid, p, p)."""
-    x = wfs.pixel_centres_rad.astype(np.float32)
-    flux = images.sum(axis=(-2, -1))
-    flux = np.where(flux > 0, flux, np.inf)
-    cx = np.einsum("...yx,x->...", images, x) / flux
-    cy = np.einsum("...yx,y->...", images, x) / flux
-    return np.stack([cx, cy], axis=-2)
-
-
-def remove_tip_tilt(slopes_rad: np.ndarray) -> np.ndarray:
-    """Remove each beacon's mean x and y slope (LGS tilt is unknown), new array."""
-    return slopes_rad - slopes_rad.mean(axis=-1, keepdims=True)
+def centroids_rad(wfs: ShackHartmann, images: np.ndarray, remove_tilt: bool = False) -> np.ndarray:
+    """Centre of gravity (n_beacons, 2, n_valid) [rad] of images (n_b, n_valid, p, p);
+    with ``remove_tilt``, less each beacon's mean x and y (the LGS tilt is unknown)."""
+    images = np.asarray(images, dtype=np.float32)
+    out = np.empty((images.shape[0], 2, images.shape[1]), dtype=np.float32)
+    centroids(images, wfs.pixel_centres_rad, remove_tilt, out)
+    return out
 
 
 def measure_slopes(wfs: ShackHartmann, downlink_phase_rad: np.ndarray,
@@ -822,8 +519,8 @@ def measure_slopes(wfs: ShackHartmann, downlink_phase_rad: np.ndarray,
     """Tilt-removed slopes (n_beacons, 2, n_valid) [rad] of one exposure.
 
     Chains :func:`exposure_images`, optional :func:`add_noise` (off unless
-    ``photons_per_subaperture`` is given), :func:`centroids_rad` and
-    :func:`remove_tip_tilt`.
+    ``photons_per_subaperture`` is given) and :func:`centroids_rad` with the
+    tilt removed.
     """
     images = exposure_images(wfs, downlink_phase_rad, phase_wavelength_m, elongation,
                              uplink_phase_rad)
@@ -831,4 +528,4 @@ def measure_slopes(wfs: ShackHartmann, downlink_phase_rad: np.ndarray,
         if rng is None:
             raise ValueError("noise needs an explicit rng")
         images = add_noise(images, photons_per_subaperture, read_noise_e, rng)
-    return remove_tip_tilt(centroids_rad(wfs, images))
+    return centroids_rad(wfs, images, remove_tilt=True)
