@@ -179,9 +179,10 @@ class Propagator:
             ui = np.floor(u - step * speed).astype(np.int64)
             w_lo = self._w0[d, l] + self._beta[d, l] * lo - step * self._step[l, 1]
             w_hi = self._w0[d, l] + self._beta[d, l] * (hi - 1) - step * self._step[l, 1]
-            offsets = np.stack([spec.line_offset(ui), spec.line_offset(ui + 1)])
-            if (ui.min() < 0 or ui.max() + 1 >= spec.n_major or np.floor(w_lo).min() - offsets.max() < 0
-                    or np.floor(w_hi).max() + 1 - offsets.min() >= spec.n_minor):
+            offsets = np.stack([spec.line_offset(ui), spec.line_offset(ui + 1)])  # per grid line
+            if (ui.min() < 0 or ui.max() + 1 >= spec.n_major
+                    or (np.floor(w_lo) - offsets.max(axis=0)).min() < 0
+                    or (np.floor(w_hi) + 1 - offsets.min(axis=0)).max() >= spec.n_minor):
                 raise ValueError(f"footprint at height {layer.height_m} m leaves its screen: "
                                  "raise turbulence.field_radius_arcsec or shorten the case")
         return steps
