@@ -6,7 +6,7 @@ from scipy import integrate, optimize, special
 
 from luckyao.imaging import Camera, Imager
 from luckyao.metrics import EncircledEnergy, centroid_px, d50_arcsec, fwhm_arcsec, strehl
-from luckyao.pupil import Telescope
+from luckyao.pupil import Telescope, TiltRemover
 from luckyao.units import ARCSEC_RAD
 
 D_M, OBSCURATION_M = 4.2, 1.2
@@ -155,3 +155,21 @@ def test_metrics_do_not_mutate_and_zero_flux_is_nan():
     np.testing.assert_array_equal(images, before)
     zero = np.zeros((1, 32, 32), dtype=np.float32)
     assert np.isnan(strehl(zero, 0.1)).all() and np.isnan(d50_arcsec(zero, 0.02)).all()
+
+
+def test_tilt_removed_rms_is_the_rms_of_the_least_squares_residual():
+    """Piston and tilt add nothing; a defocus keeps the rms of its part orthogonal
+    to [1, x, y] on the annulus (an annulus is symmetric, so that part is the
+    defocus minus its mean)."""
+    telescope = Telescope(4.2, 1.2)
+    grid = telescope.grid_for(0.033)
+    mask = telescope.mask(grid)
+    x, y = (c[mask] for c in grid.xy_m)
+    remover = TiltRemover.for_mask(grid, mask)
+    r2 = x**2 + y**2
+    defocus = 3.0 * r2
+    for tilt in (0.0, 40.0):  # rad per m: +-84 rad of tilt over the pupil
+        phase = (17.0 + tilt * x - 0.5 * tilt * y + defocus).astype(np.float32)
+        expected = 3.0 * np.std(r2)
+        assert remover.rms(phase[None])[0] == pytest.approx(expected, rel=1e-5)
+    assert remover.rms((5.0 - 7.0 * x + 3.0 * y).astype(np.float32)) == pytest.approx(0.0, abs=1e-3)

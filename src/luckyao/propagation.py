@@ -16,6 +16,7 @@ import numba
 import numpy as np
 
 from .atmosphere import Layer, StripSpec
+from .lgs import footprint_scale
 from .pupil import PupilGrid
 
 
@@ -30,7 +31,7 @@ class LineOfSight:
 
 def footprint_m(points_x_m, points_y_m, layer_height_m, los: LineOfSight):
     """Positions (x, y) [m] where rays from pupil points cross a layer (cone effect)."""
-    scale = 1.0 - layer_height_m / los.height_m if np.isfinite(los.height_m) else 1.0
+    scale = footprint_scale(layer_height_m, los.height_m)
     return (scale * np.asarray(points_x_m) + los.theta_x_rad * layer_height_m,
             scale * np.asarray(points_y_m) + los.theta_y_rad * layer_height_m)
 
@@ -153,11 +154,10 @@ class Propagator:
         for d, los in enumerate(lines_of_sight):
             for l, (layer, spec) in enumerate(zip(layers, specs)):
                 origin = np.array(footprint_m(centre_xy_m[0] + first, centre_xy_m[1] + first, layer.height_m, los))
-                scale = footprint_m(1.0, 1.0, layer.height_m, LineOfSight(0.0, 0.0, los.height_m))[0]
                 major = spec.major_axis
                 self._u0[d, l] = (origin[major] - spec.origin_m[0]) / spec.dx_m
                 self._w0[d, l] = (origin[1 - major] - spec.origin_m[1]) / spec.dx_m
-                self._beta[d, l] = scale * grid.dx_m / spec.dx_m
+                self._beta[d, l] = float(footprint_scale(layer.height_m, los.height_m)) * grid.dx_m / spec.dx_m
                 runs = self._column_runs if major == 0 else self._row_runs
                 self.n_steps_max = min(self.n_steps_max, self._steps_on_screen(spec, d, l, runs, layer))
 

@@ -62,10 +62,13 @@ class TiltRemover:
     y_m: np.ndarray
 
     @cached_property
+    def _basis(self) -> np.ndarray:
+        """B = [1, x, y], float64 (n_valid, 3)."""
+        return np.stack([np.ones_like(self.x_m), self.x_m, self.y_m], axis=1).astype(np.float64)
+
+    @cached_property
     def _projector(self) -> tuple[np.ndarray, np.ndarray]:
-        basis = np.stack([np.ones_like(self.x_m), self.x_m, self.y_m], axis=1)
-        pseudo_inverse = np.linalg.pinv(basis)
-        return basis.astype(np.float32), pseudo_inverse.astype(np.float32)
+        return self._basis.astype(np.float32), np.linalg.pinv(self._basis).astype(np.float32)
 
     def coefficients(self, phase: np.ndarray) -> np.ndarray:
         """Piston [phase unit], tip and tilt [phase unit per m], shape (..., 3)."""
@@ -78,8 +81,7 @@ class TiltRemover:
 
     @cached_property
     def _normal_inverse(self) -> np.ndarray:
-        basis = np.stack([np.ones_like(self.x_m), self.x_m, self.y_m], axis=1).astype(np.float64)
-        return np.linalg.inv(basis.T @ basis)
+        return np.linalg.inv(self._basis.T @ self._basis)
 
     def rms(self, phase: np.ndarray) -> np.ndarray:
         """Tilt-removed rms over the pupil samples, shape (...).
