@@ -52,7 +52,7 @@ def main(config_path="config/config.yaml"):
         to_camera = np.float32(REFERENCE_WAVELENGTH_M / system.camera.wavelength_m)
         np.asarray(screens.flat).sum()  # page the memory-mapped screens in
         for step in range(8):  # warm up: JIT, FFT plans
-            imager.intensity(propagator.sample(step, system.layer_scale(step))[:, imager.mask] * to_camera)
+            imager.intensity(propagator.sample_valid(step, system.layer_scale(step)) * to_camera)
         start = time.perf_counter()
         reconstructors = build_reconstructors(reconstructor_spec(case))["reconstructor"].values
         print(f"reconstructor ({case['wfs']['n_subapertures']}x{case['wfs']['n_subapertures']}): "
@@ -65,7 +65,7 @@ def main(config_path="config/config.yaml"):
         intensity = np.zeros((len(system.targets), imager.fft_size, imager.fft_size), dtype=np.float32)
         for step in range(N_STEPS):
             t0 = time.perf_counter()
-            phase = propagator.sample(step, system.layer_scale(step))[:, imager.mask]
+            phase = propagator.sample_valid(step, system.layer_scale(step))
             t1 = time.perf_counter()
             imager.accumulate(phase * to_camera, intensity)
             t2 = time.perf_counter()

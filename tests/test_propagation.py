@@ -9,6 +9,7 @@ from luckyao.pupil import PupilGrid
 
 DT_S = 0.0025
 GRID = PupilGrid(24, 4.2 / 24)
+ANNULUS = (np.hypot(*GRID.xy_m) < 2.1) & (np.hypot(*GRID.xy_m) > 0.6)
 
 
 def _single_layer(height_m, speed, direction_deg, n_steps=200, radius_m=4.0, seed=3):
@@ -38,12 +39,16 @@ def test_plane_screen_is_sampled_exactly_on_and_off_axis_with_cone_and_wind():
         prop = Propagator([layer], plane, [star, lgs], GRID, centre_xy_m=centre)
         x, y = GRID.xy_m
         e = layer.wind_unit
+        masked = Propagator([layer], plane, [star, lgs], GRID, centre_xy_m=centre, mask=ANNULUS)
         for step in (0, 13, 2999):
             phase = prop.sample(step, [1.0])
             for d, los in enumerate((star, lgs)):
                 fx, fy = footprint_m(x + centre[0], y + centre[1], layer.height_m, los)
                 qx, qy = fx - e[0] * 13.0 * DT_S * step, fy - e[1] * 13.0 * DT_S * step
                 np.testing.assert_allclose(phase[d], a * qx + b * qy, atol=2e-3)
+            # a mask computes only its samples, zero elsewhere; sample_valid packs them in mask order
+            np.testing.assert_array_equal(masked.sample(step, [1.0]), np.where(ANNULUS, phase, 0.0))
+            np.testing.assert_array_equal(masked.sample_valid(step, [1.0]), phase[:, ANNULUS])
 
 
 def test_frozen_flow_moves_the_screen_by_the_wind_vector():

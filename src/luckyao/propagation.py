@@ -58,7 +58,8 @@ def _sample_kernel(screens, starts, n_major, n_minor, skew, major_axis, u0, w0, 
     tap = np.empty(n, np.uint64)
     weight = np.empty(n, np.float32)
     out[:] = 0.0
-    out_t[:] = 0.0
+    if np.any(major_axis == 0):
+        out_t[:] = 0.0
     for l in range(starts.shape[0]):  # layer-major: footprints of one layer share cached screen lines
         for d in range(n_dir):
             if major_axis[l] == 1:
@@ -85,15 +86,29 @@ def _sample_kernel(screens, starts, n_major, n_minor, skew, major_axis, u0, w0, 
                 g_far = scale * f
                 row = lines[a]
                 for r in range(ptr[a], ptr[a + 1]):
-                    for b in range(runs[r, 0], runs[r, 1]):
+                    for b in range(_U(runs[r, 0]), _U(runs[r, 1])):  # unsigned: no wraparound code
                         t, c = tap[b], weight[b]
                         s0, s1 = screens[near + t], screens[near + t + _U(1)]
                         r0, r1 = screens[far + t], screens[far + t + _U(1)]
                         row[b] += g_near * (s0 + c * (s1 - s0)) + g_far * (r0 + c * (r1 - r0))
-    for d in range(n_dir):
-        for y in range(n):
-            for x in range(n):
-                out[d, y, x] += out_t[d, x, y]
+    if np.any(major_axis == 0):
+        for d in range(n_dir):
+            for y in range(n):
+                for r in range(row_ptr[y], row_ptr[y + 1]):
+                    for x in range(row_runs[r, 0], row_runs[r, 1]):
+                        out[d, y, x] += out_t[d, x, y]
+
+
+@numba.njit(cache=True, nogil=True)
+def _pack(grid, runs, ptr, packed):  # pragma: no cover (jit)
+    """packed[d, k] = grid[d] at the k-th sample of the runs, row by row (the mask's order)."""
+    for d in range(grid.shape[0]):
+        k = 0
+        for y in range(grid.shape[1]):
+            for r in range(ptr[y], ptr[y + 1]):
+                for x in range(runs[r, 0], runs[r, 1]):
+                    packed[d, k] = grid[d, y, x]
+                    k += 1
 
 
 @dataclass(frozen=True, eq=False)
@@ -146,6 +161,8 @@ class Propagator:
         self._major_axis = np.array([s.major_axis for s in specs], dtype=np.int64)
         self._step = np.array([s.step_samples for s in specs])  # (layer, major/minor)
         self._transposed = np.empty((len(lines_of_sight), n, n), dtype=np.float32)
+        self._grid = np.empty((len(lines_of_sight), n, n), dtype=np.float32)
+        self.n_valid = int(mask.sum())
         shape = (len(lines_of_sight), len(layers))
         self._u0, self._w0, self._beta = np.empty(shape), np.empty(shape), np.empty(shape)
         self.n_steps_max = 2**62
@@ -200,6 +217,14 @@ class Propagator:
                        self._u0 - step * self._step[:, 0], self._w0 - step * self._step[:, 1], self._beta,
                        np.asarray(layer_scale, dtype=np.float32), *self._column_runs, *self._row_runs,
                        out, self._transposed)
+        return out
+
+    def sample_valid(self, step: int, layer_scale, out: np.ndarray | None = None) -> np.ndarray:
+        """Like :meth:`sample`, but only the mask's samples: (n_los, n_valid)
+        float32 in the order of ``grid[:, mask]``."""
+        if out is None:
+            out = np.empty((self._u0.shape[0], self.n_valid), dtype=np.float32)
+        _pack(self.sample(step, layer_scale, out=self._grid), *self._row_runs, out)
         return out
 
 

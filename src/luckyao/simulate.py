@@ -98,7 +98,7 @@ def simulate(system: System, screens: ScreenSet, write_frames, sensing: LgsSensi
             for s in range(spf):
                 step = frame * spf + s
                 layer_scale = system.layer_scale(step)
-                phase_500 = propagator.sample(step, layer_scale)[:, mask]
+                phase_500 = propagator.sample_valid(step, layer_scale)
                 imager.accumulate(phase_500 * to_camera, intensity)
                 rms2 += tilt.rms(phase_500) ** 2
                 if sensing is not None:
