@@ -52,37 +52,47 @@ def main(config_path="config/config.yaml"):
         to_camera = np.float32(REFERENCE_WAVELENGTH_M / system.camera.wavelength_m)
         np.asarray(screens.flat).sum()  # page the memory-mapped screens in
         for step in range(8):  # warm up: JIT, FFT plans
-            imager.intensity(propagator.sample_valid(step, system.layer_scale(step)) * to_camera)
+            imager.intensity(propagator.sample_valid([step], system.layer_scales([step]))[0] * to_camera)
         start = time.perf_counter()
         reconstructors = build_reconstructors(reconstructor_spec(case))["reconstructor"].values
         print(f"reconstructor ({case['wfs']['n_subapertures']}x{case['wfs']['n_subapertures']}): "
               f"{time.perf_counter() - start:.1f} s")
         sensing = LgsSensing(case, list(system.layers), screens, reconstructors, seed=1)
-        for step in range(2):
-            sensing.step(step, system.layer_scale(step))
+        exposure = sensing.exposure_steps
+        sensing.exposure_rms_nm(np.arange(exposure), system.layer_scales(np.arange(exposure)))
         camera = ["propagation", "science image", "truth rms", "frame"]
         stages = dict.fromkeys(camera + ["LGS propagation", "WFS", "reconstruction"], 0.0)
         intensity = np.zeros((len(system.targets), imager.fft_size, imager.fft_size), dtype=np.float32)
-        for step in range(N_STEPS):
+        spf = system.steps_per_frame
+        for frame in range(N_STEPS // spf):
+            steps = frame * spf + np.arange(spf)
+            layer_scales = system.layer_scales(steps)
             t0 = time.perf_counter()
-            phase = propagator.sample_valid(step, system.layer_scale(step))
+            phases = propagator.sample_valid(steps, layer_scales)
             t1 = time.perf_counter()
-            imager.accumulate(phase * to_camera, intensity)
+            for phase in phases:
+                imager.accumulate(phase * to_camera, intensity)
             t2 = time.perf_counter()
-            tilt.rms(phase)
+            for phase in phases:
+                tilt.rms(phase)
             t3 = time.perf_counter()
-            if step % system.steps_per_frame == system.steps_per_frame - 1:
-                imager.to_pixels(intensity / system.steps_per_frame)
-                intensity.fill(0.0)
+            imager.to_pixels(intensity / spf)
+            intensity.fill(0.0)
             t4 = time.perf_counter()
-            complete = sensing.sample(step, system.layer_scale(step))
-            t5 = t6 = time.perf_counter()
-            if complete:
-                slopes = sensing.slopes()
+            lgs = dict.fromkeys(["LGS propagation", "WFS", "reconstruction"], 0.0)
+            for i in range(0, spf, exposure):
+                t5 = time.perf_counter()
+                sensing.sample(steps[i:i + exposure], layer_scales[i:i + exposure])
                 t6 = time.perf_counter()
+                slopes = sensing.slopes()
+                t7 = time.perf_counter()
                 sensing.rms_nm(slopes)
-            t7 = time.perf_counter()
-            for name, dt in zip(stages, (t1 - t0, t2 - t1, t3 - t2, t4 - t3, t5 - t4, t6 - t5, t7 - t6)):
+                t8 = time.perf_counter()
+                for name, dt in zip(lgs, (t6 - t5, t7 - t6, t8 - t7)):
+                    lgs[name] += dt
+            for name, dt in zip(camera, (t1 - t0, t2 - t1, t3 - t2, t4 - t3)):
+                stages[name] += dt
+            for name, dt in lgs.items():
                 stages[name] += dt
     print(f"pupil {imager.grid.n_pix}^2 samples ({imager.n_valid} in the pupil), FFT {imager.fft_size}^2, "
           f"{len(system.layers)} layers, {N_STEPS} steps, single thread")

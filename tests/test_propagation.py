@@ -41,14 +41,14 @@ def test_plane_screen_is_sampled_exactly_on_and_off_axis_with_cone_and_wind():
         e = layer.wind_unit
         masked = Propagator([layer], plane, [star, lgs], GRID, centre_xy_m=centre, mask=ANNULUS)
         for step in (0, 13, 2999):
-            phase = prop.sample(step, [1.0])
+            phase = prop.sample([step], [[1.0]])[0]
             for d, los in enumerate((star, lgs)):
                 fx, fy = footprint_m(x + centre[0], y + centre[1], layer.height_m, los)
                 qx, qy = fx - e[0] * 13.0 * DT_S * step, fy - e[1] * 13.0 * DT_S * step
                 np.testing.assert_allclose(phase[d], a * qx + b * qy, atol=2e-3)
             # a mask computes only its samples, zero elsewhere; sample_valid packs them in mask order
-            np.testing.assert_array_equal(masked.sample(step, [1.0]), np.where(ANNULUS, phase, 0.0))
-            np.testing.assert_array_equal(masked.sample_valid(step, [1.0]), phase[:, ANNULUS])
+            np.testing.assert_array_equal(masked.sample([step], [[1.0]])[0], np.where(ANNULUS, phase, 0.0))
+            np.testing.assert_array_equal(masked.sample_valid([step], [[1.0]])[0], phase[:, ANNULUS])
 
 
 def test_frozen_flow_moves_the_screen_by_the_wind_vector():
@@ -60,10 +60,10 @@ def test_frozen_flow_moves_the_screen_by_the_wind_vector():
     shift = speed * n * DT_S * np.array([np.cos(np.radians(direction)), np.sin(np.radians(direction))])
     displaced = LineOfSight(-shift[0] / height, -shift[1] / height)
     prop = Propagator([layer], screens, [LineOfSight(0.0, 0.0), displaced], GRID)
-    moved = prop.sample(n, [1.0])[0]
-    reference = prop.sample(0, [1.0])[1]
+    moved = prop.sample([n], [[1.0]])[0][0]
+    reference = prop.sample([0], [[1.0]])[0][1]
     np.testing.assert_allclose(moved, reference, atol=1e-4)
-    assert np.std(moved - prop.sample(0, [1.0])[0]) > 0.1  # the screen did move
+    assert np.std(moved - prop.sample([0], [[1.0]])[0][0]) > 0.1  # the screen did move
 
 
 def test_cone_effect_scales_the_footprint():
@@ -72,7 +72,7 @@ def test_cone_effect_scales_the_footprint():
     scale = 1 - 9000.0 / beacon_height
     lgs = Propagator([layer], screens, [LineOfSight(0.0, 0.0, beacon_height)], GRID)
     star = Propagator([layer], screens, [LineOfSight(0.0, 0.0)], PupilGrid(GRID.n_pix, scale * GRID.dx_m))
-    np.testing.assert_allclose(lgs.sample(5, [1.0]), star.sample(5, [1.0]), atol=1e-5)
+    np.testing.assert_allclose(lgs.sample([5], [[1.0]])[0], star.sample([5], [[1.0]])[0], atol=1e-5)
 
 
 def test_layers_add_with_their_weights():
@@ -82,15 +82,30 @@ def test_layers_add_with_their_weights():
     both = Propagator([l1, l2], ScreenSet.from_screens(s1.specs + s2.specs, [screen1, screen2]), los, GRID)
     one = Propagator([l1], s1, los, GRID)
     two = Propagator([l2], s2, los, GRID)
-    np.testing.assert_allclose(both.sample(9, [0.5, 2.0]),
-                               0.5 * one.sample(9, [1.0]) + 2.0 * two.sample(9, [1.0]), atol=1e-4)
+    np.testing.assert_allclose(both.sample([9], [[0.5, 2.0]])[0],
+                               0.5 * one.sample([9], [[1.0]])[0] + 2.0 * two.sample([9], [[1.0]])[0], atol=1e-4)
+
+
+def test_steps_sampled_together_equal_steps_sampled_one_by_one():
+    """A frame's steps go in one call (with each step's layer weights): the same
+    numbers as one call per step, for layers along x and y and a masked grid."""
+    l1, s1, screen1 = _single_layer(100.0, 5.0, 10.0, seed=1)
+    l2, s2, screen2 = _single_layer(8000.0, 30.0, 250.0, seed=2)
+    screens = ScreenSet.from_screens(s1.specs + s2.specs, [screen1, screen2])
+    assert {spec.major_axis for spec in screens.specs} == {0, 1}
+    prop = Propagator([l1, l2], screens, [LineOfSight(1e-5, 0.0), LineOfSight(0.0, 2e-5, 22000.0)], GRID,
+                      mask=ANNULUS)
+    steps, scales = [3, 4, 11], [[1.0, 2.0], [0.5, 1.5], [3.0, 0.2]]
+    together = prop.sample_valid(steps, scales)
+    for step, scale, phase in zip(steps, scales, together):
+        np.testing.assert_array_equal(phase, prop.sample_valid([step], [scale])[0])
 
 
 def test_leaving_the_screen_is_an_error():
     layer, screens, _ = _single_layer(1000.0, 10.0, 0.0, n_steps=50)
     prop = Propagator([layer], screens, [LineOfSight(0.0, 0.0)], GRID)
     with pytest.raises(IndexError):
-        prop.sample(prop.n_steps_max, [1.0])
+        prop.sample([prop.n_steps_max], [[1.0]])[0]
     with pytest.raises(ValueError, match="leaves its screen"):
         Propagator([layer], screens, [LineOfSight(0.0, 0.01)], GRID)  # 10 m across the wind
 

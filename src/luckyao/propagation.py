@@ -41,31 +41,35 @@ _U = numba.uint64  # unsigned indices: no negative-index wraparound, faster gath
 
 @numba.njit(cache=True, fastmath=True, nogil=True)
 def _sample_kernel(screens, starts, n_major, n_minor, skew, major_axis, u0, w0, beta, layer_scale,
-                   column_runs, column_ptr, row_runs, row_ptr, out, out_t):  # pragma: no cover (jit)
-    """out[d, y, x] = sum_l scale[l] * bilinear(screen_l at the footprint of grid point (y, x)).
+                   column_runs, column_ptr, row_runs, row_ptr, out):  # pragma: no cover (jit)
+    """out[d, y, x] = sum_l scale[d, l] * bilinear(screen_l at the footprint of grid point (y, x)).
+
+    A "direction" ``d`` is one line of sight at one time step: a frame's or an
+    exposure's steps go in one call, so that each layer's footprints are read
+    from memory once for all of them (they move by less than a sample per step).
 
     On layer ``l`` the grid is axis-aligned: grid line ``a`` along the strip's
     major axis lies at ``u = u0[d, l] + beta[d, l] a`` [samples], point ``b``
     on it at minor ``w = w0[d, l] + beta[d, l] b``. Lines are grid rows (y)
-    when the major axis is y, else columns, accumulated transposed in
-    ``out_t``. Per line the two screen lines ``floor(u)`` and ``+1`` are
-    contiguous and the minor taps and weights are shared by all lines. Only the
-    mask's runs are computed: ``runs[ptr[a]:ptr[a + 1]]`` are the (start, end)
-    of line ``a``'s runs. Footprints stay on the screens (checked by the
-    caller), so every index is non-negative.
+    when the major axis is y, else columns. Per line the two screen lines
+    ``floor(u)`` and ``+1`` are contiguous: they are interpolated first, into
+    ``between``; the minor taps and weights are shared by all lines. Only the mask's runs are computed:
+    ``runs[ptr[a]:ptr[a + 1]]`` are the (start, end) of line ``a``'s runs.
+    Footprints stay on the screens (checked by the caller), so every index is
+    non-negative: indices are unsigned, which spares the wraparound code.
     """
     n_dir, n, _ = out.shape
     tap = np.empty(n, np.uint64)
     weight = np.empty(n, np.float32)
+    between = np.empty(int(beta.max() * n) + 4, np.float32)  # taps reach beta (n - 1) + 2
     out[:] = 0.0
-    if np.any(major_axis == 0):
-        out_t[:] = 0.0
     for l in range(starts.shape[0]):  # layer-major: footprints of one layer share cached screen lines
+        if major_axis[l] == 1:  # lines are rows, points along x
+            runs, ptr, line_stride, point_stride = row_runs, row_ptr, n, 1
+        else:  # lines are columns: a column's points are n apart, its neighbours share cache lines
+            runs, ptr, line_stride, point_stride = column_runs, column_ptr, 1, n
         for d in range(n_dir):
-            if major_axis[l] == 1:
-                lines, runs, ptr = out[d], row_runs, row_ptr
-            else:
-                lines, runs, ptr = out_t[d], column_runs, column_ptr
+            grid = out[d].reshape(-1)
             first = np.floor(w0[d, l])  # minor coordinates may be negative before the line offset
             for b in range(n):
                 w = w0[d, l] - first + beta[d, l] * b
@@ -73,7 +77,7 @@ def _sample_kernel(screens, starts, n_major, n_minor, skew, major_axis, u0, w0, 
                 tap[b] = j
                 weight[b] = np.float32(w - j)
             m, k, n_lines = n_minor[l], skew[l], n_major[l]
-            scale = np.float32(layer_scale[l])
+            scale = np.float32(layer_scale[d, l])
             for a in range(n):
                 if ptr[a + 1] == ptr[a]:
                     continue
@@ -84,19 +88,16 @@ def _sample_kernel(screens, starts, n_major, n_minor, skew, major_axis, u0, w0, 
                 far = _U(starts[l] + (i + 1) * m - (k * (i + 1)) // n_lines + np.int64(first))
                 g_near = scale * (np.float32(1.0) - f)
                 g_far = scale * f
-                row = lines[a]
+                line = _U(a * line_stride)
+                stride = _U(point_stride)
+                # along the major axis first: contiguous, vectorised; then the minor taps
+                for j in range(tap[runs[ptr[a], 0]], tap[runs[ptr[a + 1] - 1, 1] - 1] + _U(2)):
+                    between[j] = g_near * screens[near + j] + g_far * screens[far + j]
                 for r in range(ptr[a], ptr[a + 1]):
-                    for b in range(_U(runs[r, 0]), _U(runs[r, 1])):  # unsigned: no wraparound code
+                    for b in range(_U(runs[r, 0]), _U(runs[r, 1])):
                         t, c = tap[b], weight[b]
-                        s0, s1 = screens[near + t], screens[near + t + _U(1)]
-                        r0, r1 = screens[far + t], screens[far + t + _U(1)]
-                        row[b] += g_near * (s0 + c * (s1 - s0)) + g_far * (r0 + c * (r1 - r0))
-    if np.any(major_axis == 0):
-        for d in range(n_dir):
-            for y in range(n):
-                for r in range(row_ptr[y], row_ptr[y + 1]):
-                    for x in range(row_runs[r, 0], row_runs[r, 1]):
-                        out[d, y, x] += out_t[d, x, y]
+                        s0, s1 = between[t], between[t + _U(1)]
+                        grid[line + b * stride] += s0 + c * (s1 - s0)
 
 
 @numba.njit(cache=True, nogil=True)
@@ -160,8 +161,7 @@ class Propagator:
         self._skew = np.array([s.skew for s in specs], dtype=np.int64)
         self._major_axis = np.array([s.major_axis for s in specs], dtype=np.int64)
         self._step = np.array([s.step_samples for s in specs])  # (layer, major/minor)
-        self._transposed = np.empty((len(lines_of_sight), n, n), dtype=np.float32)
-        self._grid = np.empty((len(lines_of_sight), n, n), dtype=np.float32)
+        self._grids = {}  # per number of steps, for sample_valid
         self.n_valid = int(mask.sum())
         shape = (len(lines_of_sight), len(layers))
         self._u0, self._w0, self._beta = np.empty(shape), np.empty(shape), np.empty(shape)
@@ -204,28 +204,43 @@ class Propagator:
                                  "raise turbulence.field_radius_arcsec or shorten the case")
         return steps
 
-    def sample(self, step: int, layer_scale, out: np.ndarray | None = None) -> np.ndarray:
-        """Phases (n_los, n, n) float32 on the grid at time step ``step``, into
-        ``out`` if given; layer ``l`` weighted by ``layer_scale[l]`` (e.g.
-        r0^-5/6 sqrt(Cn2 fraction): rad at 500 nm)."""
-        if not 0 <= step < self.n_steps_max:
-            raise IndexError(f"step {step} outside the screens' {self.n_steps_max} steps")
+    def sample(self, steps, layer_scales, out: np.ndarray | None = None) -> np.ndarray:
+        """Phases (k, n_los, n, n) float32 on the grid at the k time ``steps``,
+        into ``out`` if given; at step ``steps[i]`` layer ``l`` is weighted by
+        ``layer_scales[i, l]`` (e.g. r0^-5/6 sqrt(Cn2 fraction): rad at 500 nm)."""
+        steps = np.asarray(steps, dtype=np.int64).reshape(-1)
+        scales = np.asarray(layer_scales, dtype=np.float32).reshape(len(steps), -1)
+        bad = steps[(steps < 0) | (steps >= self.n_steps_max)]
+        if bad.size:
+            raise IndexError(f"step {bad[0]} outside the screens' {self.n_steps_max} steps")
+        n_los, n = self._u0.shape[0], self.grid.n_pix
         if out is None:
-            n = self.grid.n_pix
-            out = np.empty((self._u0.shape[0], n, n), dtype=np.float32)
+            out = np.empty((len(steps), n_los, n, n), dtype=np.float32)
+        elif out.shape != (len(steps), n_los, n, n) or out.dtype != np.float32 or not out.flags.c_contiguous:
+            raise ValueError(f"out must be C-contiguous float32 of shape {(len(steps), n_los, n, n)}")
+        u0 = (self._u0 - steps[:, None, None] * self._step[:, 0]).reshape(-1, self._u0.shape[1])
+        w0 = (self._w0 - steps[:, None, None] * self._step[:, 1]).reshape(u0.shape)
+        beta = np.tile(self._beta, (len(steps), 1))
         _sample_kernel(self._screens, self._starts, self._n_major, self._n_minor, self._skew, self._major_axis,
-                       self._u0 - step * self._step[:, 0], self._w0 - step * self._step[:, 1], self._beta,
-                       np.asarray(layer_scale, dtype=np.float32), *self._column_runs, *self._row_runs,
-                       out, self._transposed)
+                       u0, w0, beta, np.repeat(scales, n_los, axis=0), *self._column_runs, *self._row_runs,
+                       out.reshape(-1, n, n))
         return out
 
-    def sample_valid(self, step: int, layer_scale, out: np.ndarray | None = None) -> np.ndarray:
-        """Like :meth:`sample`, but only the mask's samples: (n_los, n_valid)
+    def sample_valid(self, steps, layer_scales, out: np.ndarray | None = None) -> np.ndarray:
+        """Like :meth:`sample`, but only the mask's samples: (k, n_los, n_valid)
         float32 in the order of ``grid[:, mask]``."""
+        k, n_los = len(np.atleast_1d(steps)), self._u0.shape[0]
         if out is None:
-            out = np.empty((self._u0.shape[0], self.n_valid), dtype=np.float32)
-        _pack(self.sample(step, layer_scale, out=self._grid), *self._row_runs, out)
+            out = np.empty((k, n_los, self.n_valid), dtype=np.float32)
+        grid = self.sample(steps, layer_scales, out=self._grid(k))
+        _pack(grid.reshape(k * n_los, *grid.shape[2:]), *self._row_runs, out.reshape(k * n_los, -1))
         return out
+
+    def _grid(self, k: int) -> np.ndarray:
+        """The (k, n_los, n, n) grid behind :meth:`sample_valid` for k steps."""
+        if k not in self._grids:
+            self._grids[k] = np.empty((k, self._u0.shape[0], self.grid.n_pix, self.grid.n_pix), dtype=np.float32)
+        return self._grids[k]
 
 
 def _runs(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

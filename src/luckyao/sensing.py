@@ -1,10 +1,10 @@
 """The LGS measurement chain of the time loop: turbulence -> slopes -> ``lgs_rms``.
 
-Per time step the downlink phase of every beacon (cone effect) is sampled on
-the WFS pupil grid and the uplink phase on the launch aperture (the upward
-beam's cone, anchored on the launch position). Every ``exposure_steps`` steps
-the WFS exposure gives tilt-removed slopes, and each target's reconstructor
-gives the tilt-removed rms of the reconstructed wavefront along it.
+For each of an exposure's ``exposure_steps`` time steps the downlink phase of
+every beacon (cone effect) is sampled on the WFS pupil grid and the uplink
+phase on the launch aperture (the upward beam's cone, anchored on the launch
+position). The exposure gives tilt-removed slopes, and each target's
+reconstructor gives the tilt-removed rms of the reconstructed wavefront along it.
 
 A 10 ms lucky frame spans ``steps_per_frame / exposure_steps`` WFS exposures
 (2 of 5 ms by default); its ``lgs_rms`` is ``sqrt(mean(rms^2))`` over them
@@ -58,16 +58,16 @@ class LgsSensing:
         self._up_buffer = np.zeros((self.exposure_steps, n_b, n_launch, n_launch), dtype=np.float32)
         self.n_steps_max = min(self._down.n_steps_max, self._up.n_steps_max)
 
-    def sample(self, step: int, layer_scale) -> bool:
-        """Sample the beacons' down- and uplink phases at ``step`` into the exposure;
-        True when that completes the exposure."""
-        k = step % self.exposure_steps
-        self._down.sample(step, layer_scale, out=self._down_buffer[k])
-        self._up.sample(step, layer_scale, out=self._up_buffer[k])
-        return k == self.exposure_steps - 1
+    def sample(self, steps, layer_scales) -> None:
+        """Sample the beacons' down- and uplink phases of one exposure: its
+        ``exposure_steps`` time ``steps`` and their ``layer_scales`` (k, n_layers)."""
+        if len(steps) != self.exposure_steps:
+            raise ValueError(f"an exposure has {self.exposure_steps} steps, got {len(steps)}")
+        self._down.sample(steps, layer_scales, out=self._down_buffer)
+        self._up.sample(steps, layer_scales, out=self._up_buffer)
 
     def slopes(self) -> np.ndarray:
-        """Tilt-removed slopes (n_beacons, 2, n_valid) [rad] of the completed exposure."""
+        """Tilt-removed slopes (n_beacons, 2, n_valid) [rad] of the sampled exposure."""
         return measure_slopes(self.wfs, self._down_buffer, REFERENCE_WAVELENGTH_M, self.elongation,
                               self._up_buffer, self.photons, self.read_noise_e,
                               self.rng if self.photons is not None else None)
@@ -76,7 +76,8 @@ class LgsSensing:
         """Each target's reconstructed tilt-removed rms [nm] (n_targets,)."""
         return np.array([lgs_rms_nm(r, slopes) for r in self.reconstructors])
 
-    def step(self, step: int, layer_scale) -> np.ndarray | None:
-        """Sample the beacons at ``step``; at an exposure's last step return each
-        target's reconstructed tilt-removed rms [nm] (n_targets,), else None."""
-        return self.rms_nm(self.slopes()) if self.sample(step, layer_scale) else None
+    def exposure_rms_nm(self, steps, layer_scales) -> np.ndarray:
+        """Each target's reconstructed tilt-removed rms [nm] (n_targets,) from the
+        exposure of time ``steps`` (see :meth:`sample`)."""
+        self.sample(steps, layer_scales)
+        return self.rms_nm(self.slopes())

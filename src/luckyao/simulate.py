@@ -53,9 +53,10 @@ class System:
             n_frames=int(np.floor(case["duration_s"] / cam["frame_time_s"] + 1e-9)),
         )
 
-    def layer_scale(self, step: int) -> np.ndarray:
-        """Per-layer factor from the normalised screens to rad at 500 nm at ``step``."""
-        r0 = self.r0.r0_m(step * self.time_step_s)
+    def layer_scales(self, steps) -> np.ndarray:
+        """Per-layer factors (k, n_layers) from the normalised screens to rad at
+        500 nm at the k time ``steps``."""
+        r0 = self.r0.r0_m(np.asarray(steps) * self.time_step_s).reshape(-1, 1)
         return r0 ** (-5 / 6) * np.sqrt([layer.cn2_fraction for layer in self.layers])
 
 
@@ -94,18 +95,15 @@ def simulate(system: System, screens: ScreenSet, write_frames, sensing: LgsSensi
             frame = start + j
             intensity.fill(0.0)
             rms2 = np.zeros(n_targets)
-            exposures = []
-            for s in range(spf):
-                step = frame * spf + s
-                layer_scale = system.layer_scale(step)
-                phase_500 = propagator.sample_valid(step, layer_scale)
+            steps = frame * spf + np.arange(spf)
+            layer_scales = system.layer_scales(steps)
+            for phase_500 in propagator.sample_valid(steps, layer_scales):  # (n_targets, n_valid) per step
                 imager.accumulate(phase_500 * to_camera, intensity)
                 rms2 += tilt.rms(phase_500) ** 2
-                if sensing is not None:
-                    exposure_rms = sensing.step(step, layer_scale)
-                    if exposure_rms is not None:
-                        exposures.append(exposure_rms)
-            if exposures:
+            if sensing is not None:  # the frame's exposures (config: spf is a multiple of exposure_steps)
+                exposures = [sensing.exposure_rms_nm(steps[i:i + sensing.exposure_steps],
+                                                     layer_scales[i:i + sensing.exposure_steps])
+                             for i in range(0, spf, sensing.exposure_steps)]
                 lgs_rms[:, frame] = lucky_frame_rms_nm(np.stack(exposures, axis=-1))
             buffer[:, j] = imager.to_pixels(intensity / spf)
             axis_strehl[:, frame] = buffer[:, j, n_pix // 2, n_pix // 2] / imager.diffraction_limited_peak
