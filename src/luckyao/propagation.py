@@ -40,25 +40,27 @@ _U = numba.uint64  # unsigned indices: no negative-index wraparound, faster gath
 
 
 @numba.njit(cache=True, fastmath=True, nogil=True)
-def _sample_kernel(screens, starts, n_major, n_minor, skew, major_axis, u0, w0, beta, layer_scale,
+def _sample_kernel(screens, starts, n_major, n_minor, skew, major_axis, flow, u0, w0, beta, steps, layer_scales,
                    column_runs, column_ptr, row_runs, row_ptr, out):  # pragma: no cover (jit)
-    """out[d, y, x] = sum_l scale[d, l] * bilinear(screen_l at the footprint of grid point (y, x)).
+    """out[s, d, y, x] = sum_l layer_scales[s, l] bilinear(screen_l at the footprint of grid
+    point (y, x) along line of sight d at time step steps[s]).
 
-    A "direction" ``d`` is one line of sight at one time step: a frame's or an
-    exposure's steps go in one call, so that each layer's footprints are read
-    from memory once for all of them (they move by less than a sample per step).
+    A frame's or an exposure's steps go in one call, so that each layer's
+    footprints are read from memory once for all of them (they move by less
+    than a sample per step).
 
     On layer ``l`` the grid is axis-aligned: grid line ``a`` along the strip's
-    major axis lies at ``u = u0[d, l] + beta[d, l] a`` [samples], point ``b``
-    on it at minor ``w = w0[d, l] + beta[d, l] b``. Lines are grid rows (y)
-    when the major axis is y, else columns. Per line the two screen lines
-    ``floor(u)`` and ``+1`` are contiguous: they are interpolated first, into
-    ``between``; the minor taps and weights are shared by all lines. Only the mask's runs are computed:
+    major axis lies at ``u = u0[d, l] - step flow[l, 0] + beta[d, l] a``
+    [samples], point ``b`` on it at minor ``w = w0[d, l] - step flow[l, 1] +
+    beta[d, l] b``. Lines are grid rows (y) when the major axis is y, else
+    columns. Per line the two screen lines ``floor(u)`` and ``+1`` are
+    contiguous: they are interpolated first, into ``between``; the minor taps
+    and weights are shared by all lines. Only the mask's runs are computed:
     ``runs[ptr[a]:ptr[a + 1]]`` are the (start, end) of line ``a``'s runs.
     Footprints stay on the screens (checked by the caller), so every index is
     non-negative: indices are unsigned, which spares the wraparound code.
     """
-    n_dir, n, _ = out.shape
+    n_steps, n_dir, n, _ = out.shape
     tap = np.empty(n, np.uint64)
     weight = np.empty(n, np.float32)
     between = np.empty(int(beta.max() * n) + 4, np.float32)  # taps reach beta (n - 1) + 2
@@ -68,36 +70,39 @@ def _sample_kernel(screens, starts, n_major, n_minor, skew, major_axis, u0, w0, 
             runs, ptr, line_stride, point_stride = row_runs, row_ptr, n, 1
         else:  # lines are columns: a column's points are n apart, its neighbours share cache lines
             runs, ptr, line_stride, point_stride = column_runs, column_ptr, 1, n
-        for d in range(n_dir):
-            grid = out[d].reshape(-1)
-            first = np.floor(w0[d, l])  # minor coordinates may be negative before the line offset
-            for b in range(n):
-                w = w0[d, l] - first + beta[d, l] * b
-                j = np.uint64(w)
-                tap[b] = j
-                weight[b] = np.float32(w - j)
-            m, k, n_lines = n_minor[l], skew[l], n_major[l]
-            scale = np.float32(layer_scale[d, l])
-            for a in range(n):
-                if ptr[a + 1] == ptr[a]:
-                    continue
-                u = u0[d, l] + beta[d, l] * a
-                i = np.int64(u)
-                f = np.float32(u - i)
-                near = _U(starts[l] + i * m - (k * i) // n_lines + np.int64(first))
-                far = _U(starts[l] + (i + 1) * m - (k * (i + 1)) // n_lines + np.int64(first))
-                g_near = scale * (np.float32(1.0) - f)
-                g_far = scale * f
-                line = _U(a * line_stride)
-                stride = _U(point_stride)
-                # along the major axis first: contiguous, vectorised; then the minor taps
-                for j in range(tap[runs[ptr[a], 0]], tap[runs[ptr[a + 1] - 1, 1] - 1] + _U(2)):
-                    between[j] = g_near * screens[near + j] + g_far * screens[far + j]
-                for r in range(ptr[a], ptr[a + 1]):
-                    for b in range(_U(runs[r, 0]), _U(runs[r, 1])):
-                        t, c = tap[b], weight[b]
-                        s0, s1 = between[t], between[t + _U(1)]
-                        grid[line + b * stride] += s0 + c * (s1 - s0)
+        m, k, n_lines = n_minor[l], skew[l], n_major[l]
+        for s in range(n_steps):
+            scale = np.float32(layer_scales[s, l])
+            for d in range(n_dir):
+                grid = out[s, d].reshape(-1)
+                u_first = u0[d, l] - steps[s] * flow[l, 0]
+                w_first = w0[d, l] - steps[s] * flow[l, 1]
+                first = np.floor(w_first)  # minor coordinates may be negative before the line offset
+                for b in range(n):
+                    w = w_first - first + beta[d, l] * b
+                    j = np.uint64(w)
+                    tap[b] = j
+                    weight[b] = np.float32(w - j)
+                for a in range(n):
+                    if ptr[a + 1] == ptr[a]:
+                        continue
+                    u = u_first + beta[d, l] * a
+                    i = np.int64(u)
+                    f = np.float32(u - i)
+                    near = _U(starts[l] + i * m - (k * i) // n_lines + np.int64(first))
+                    far = _U(starts[l] + (i + 1) * m - (k * (i + 1)) // n_lines + np.int64(first))
+                    g_near = scale * (np.float32(1.0) - f)
+                    g_far = scale * f
+                    line = _U(a * line_stride)
+                    stride = _U(point_stride)
+                    # along the major axis first: contiguous, vectorised; then the minor taps
+                    for j in range(tap[runs[ptr[a], 0]], tap[runs[ptr[a + 1] - 1, 1] - 1] + _U(2)):
+                        between[j] = g_near * screens[near + j] + g_far * screens[far + j]
+                    for r in range(ptr[a], ptr[a + 1]):
+                        for b in range(_U(runs[r, 0]), _U(runs[r, 1])):
+                            t, c = tap[b], weight[b]
+                            s0, s1 = between[t], between[t + _U(1)]
+                            grid[line + b * stride] += s0 + c * (s1 - s0)
 
 
 @numba.njit(cache=True, nogil=True)
@@ -218,12 +223,9 @@ class Propagator:
             out = np.empty((len(steps), n_los, n, n), dtype=np.float32)
         elif out.shape != (len(steps), n_los, n, n) or out.dtype != np.float32 or not out.flags.c_contiguous:
             raise ValueError(f"out must be C-contiguous float32 of shape {(len(steps), n_los, n, n)}")
-        u0 = (self._u0 - steps[:, None, None] * self._step[:, 0]).reshape(-1, self._u0.shape[1])
-        w0 = (self._w0 - steps[:, None, None] * self._step[:, 1]).reshape(u0.shape)
-        beta = np.tile(self._beta, (len(steps), 1))
         _sample_kernel(self._screens, self._starts, self._n_major, self._n_minor, self._skew, self._major_axis,
-                       u0, w0, beta, np.repeat(scales, n_los, axis=0), *self._column_runs, *self._row_runs,
-                       out.reshape(-1, n, n))
+                       self._step, self._u0, self._w0, self._beta, steps, scales,
+                       *self._column_runs, *self._row_runs, out)
         return out
 
     def sample_valid(self, steps, layer_scales, out: np.ndarray | None = None) -> np.ndarray:
