@@ -1,9 +1,11 @@
 """The time loop of one case: turbulence -> pupil phase -> lucky-camera frames.
 
-Per 2.5 ms step: the propagator samples every layer along each target's line
-of sight; the camera image of the phase (scaled from 500 nm to the camera
-wavelength) is added to the frame; the tilt-removed rms of the phase is the
-per-frame truth. A frame is the mean of its steps' unit-flux images.
+Per frame, the propagator samples every layer along each target's line of
+sight at each of the frame's 2.5 ms steps (one call for all of them); the camera
+image of each step's phase (scaled from 500 nm to the camera wavelength) is
+added to the frame; the tilt-removed rms of the phases is the per-frame truth. A
+frame is the mean of its steps' unit-flux images. With LGS, the frame's WFS
+exposures are sensed after its steps.
 """
 
 from dataclasses import dataclass
