@@ -148,6 +148,18 @@ def test_uplink_aperture_broadens_the_spot():
     np.testing.assert_allclose(laser.sum(axis=(-2, -1)), point.sum(axis=(-2, -1)), rtol=0.02)
 
 
+@pytest.mark.parametrize("n_sub", [8, 32])
+def test_the_wfs_reads_only_its_sensed_samples(n_sub):
+    """The propagation samples only ``sensed_mask`` (pupil samples of valid
+    sub-apertures): phases elsewhere must not change the exposure."""
+    wfs = sh.ShackHartmann(TELESCOPE, n_sub, WAVELENGTH_M)
+    assert wfs.sensed_mask.sum() < wfs.mask.sum()  # some pupil samples are in invalid sub-apertures
+    phase = np.random.default_rng(4).normal(0.0, 2.0, (2, 1) + wfs.mask.shape).astype(np.float32)
+    sensed = np.where(wfs.sensed_mask, phase, np.float32(0.0))
+    np.testing.assert_array_equal(sh.exposure_images(wfs, sensed, WAVELENGTH_M),
+                                  sh.exposure_images(wfs, phase, WAVELENGTH_M))
+
+
 def test_two_steps_average_and_noise_is_off_by_default():
     wfs = sh.ShackHartmann(TELESCOPE, 8, WAVELENGTH_M)
     a = tilt_phase(wfs, 0.1 * ARCSEC_RAD, 0.0)[0]

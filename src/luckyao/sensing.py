@@ -49,7 +49,7 @@ class LgsSensing:
         directions = self.lgs.directions_rad
         launch = self.lgs.launch_xy_m
         self._down = Propagator(layers, screens, [LineOfSight(tx, ty, height) for tx, ty in directions],
-                                self.wfs.grid, mask=self.wfs.mask)
+                                self.wfs.grid, mask=self.wfs.sensed_mask)
         up_los = [uplink_line_of_sight(direction, launch, height) for direction in directions]
         self._up = Propagator(layers, screens, up_los, self.wfs.launch_grid, centre_xy_m=tuple(launch))
         self.elongation = lgs_elongation_otf(self.wfs, self.lgs)

@@ -119,6 +119,12 @@ class ShackHartmann:
         return int(self.valid.sum())
 
     @cached_property
+    def sensed_mask(self) -> np.ndarray:
+        """Pupil samples inside valid sub-apertures, bool (n, n): the only phases the WFS reads."""
+        n_s = self.samples_per_subaperture
+        return self.mask & np.kron(self.valid, np.ones((n_s, n_s), dtype=bool))
+
+    @cached_property
     def subaperture_index(self) -> np.ndarray:
         """Integer ``(iy, ix)`` (n_valid, 2) of the valid sub-apertures (row-major order)."""
         return np.argwhere(self.valid)
