@@ -59,7 +59,7 @@ def main(config_path="config/config.yaml"):
               f"{time.perf_counter() - start:.1f} s")
         sensing = LgsSensing(case, list(system.layers), screens, reconstructors, seed=1)
         exposure = sensing.exposure_steps
-        sensing.exposure_rms_nm(np.arange(exposure), system.layer_scales(np.arange(exposure)))
+        sensing.rms_nm(sensing.exposure_slopes(np.arange(exposure), system.layer_scales(np.arange(exposure))))
         camera = ["propagation", "science image", "truth rms", "frame"]
         stages = dict.fromkeys(camera + ["LGS propagation", "WFS", "reconstruction"], 0.0)
         intensity = np.zeros((len(system.targets), imager.fft_size, imager.fft_size), dtype=np.float32)
@@ -79,20 +79,18 @@ def main(config_path="config/config.yaml"):
             imager.to_pixels(intensity / spf)
             intensity.fill(0.0)
             t4 = time.perf_counter()
-            lgs = dict.fromkeys(["LGS propagation", "WFS", "reconstruction"], 0.0)
+            slopes = []
             for i in range(0, spf, exposure):
                 t5 = time.perf_counter()
                 sensing.sample(steps[i:i + exposure], layer_scales[i:i + exposure])
                 t6 = time.perf_counter()
-                slopes = sensing.slopes()
-                t7 = time.perf_counter()
-                sensing.rms_nm(slopes)
-                t8 = time.perf_counter()
-                for name, dt in zip(lgs, (t6 - t5, t7 - t6, t8 - t7)):
-                    lgs[name] += dt
+                slopes.append(sensing.slopes())
+                stages["LGS propagation"] += t6 - t5
+                stages["WFS"] += time.perf_counter() - t6
+            t7 = time.perf_counter()
+            sensing.rms_nm(np.stack(slopes))  # the frame's exposures
+            stages["reconstruction"] += time.perf_counter() - t7
             for name, dt in zip(camera, (t1 - t0, t2 - t1, t3 - t2, t4 - t3)):
-                stages[name] += dt
-            for name, dt in lgs.items():
                 stages[name] += dt
     print(f"pupil {imager.grid.n_pix}^2 samples ({imager.n_valid} in the pupil), FFT {imager.fft_size}^2, "
           f"{len(system.layers)} layers, {N_STEPS} steps, single thread")

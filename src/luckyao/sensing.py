@@ -73,11 +73,13 @@ class LgsSensing:
                               self.rng if self.photons is not None else None)
 
     def rms_nm(self, slopes: np.ndarray) -> np.ndarray:
-        """Each target's reconstructed tilt-removed rms [nm] (n_targets,)."""
+        """Each target's reconstructed tilt-removed rms [nm] (n_targets, ...) from
+        slopes (..., n_beacons, 2, n_valid): a frame's exposures in one call read
+        the reconstructors once."""
         return np.array([lgs_rms_nm(r, slopes) for r in self.reconstructors])
 
-    def exposure_rms_nm(self, steps, layer_scales) -> np.ndarray:
-        """Each target's reconstructed tilt-removed rms [nm] (n_targets,) from the
-        exposure of time ``steps`` (see :meth:`sample`)."""
+    def exposure_slopes(self, steps, layer_scales) -> np.ndarray:
+        """Tilt-removed slopes (n_beacons, 2, n_valid) [rad] of the exposure of
+        time ``steps`` (see :meth:`sample`)."""
         self.sample(steps, layer_scales)
-        return self.rms_nm(self.slopes())
+        return self.slopes()

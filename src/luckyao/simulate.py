@@ -103,10 +103,10 @@ def simulate(system: System, screens: ScreenSet, write_frames, sensing: LgsSensi
                 imager.accumulate(phase_500 * to_camera, intensity)
                 rms2 += tilt.rms(phase_500) ** 2
             if sensing is not None:  # the frame's exposures (config: spf is a multiple of exposure_steps)
-                exposures = [sensing.exposure_rms_nm(steps[i:i + sensing.exposure_steps],
-                                                     layer_scales[i:i + sensing.exposure_steps])
-                             for i in range(0, spf, sensing.exposure_steps)]
-                lgs_rms[:, frame] = lucky_frame_rms_nm(np.stack(exposures, axis=-1))
+                slopes = [sensing.exposure_slopes(steps[i:i + sensing.exposure_steps],
+                                                  layer_scales[i:i + sensing.exposure_steps])
+                          for i in range(0, spf, sensing.exposure_steps)]
+                lgs_rms[:, frame] = lucky_frame_rms_nm(sensing.rms_nm(np.stack(slopes)))
             buffer[:, j] = imager.to_pixels(intensity / spf)
             axis_strehl[:, frame] = buffer[:, j, n_pix // 2, n_pix // 2] / imager.diffraction_limited_peak
             true_rms_nm[:, frame] = phase_rad_to_nm(np.sqrt(rms2 / spf), REFERENCE_WAVELENGTH_M)
