@@ -9,7 +9,6 @@ from luckyao.pupil import PupilGrid
 
 DT_S = 0.0025
 GRID = PupilGrid(24, 4.2 / 24)
-ANNULUS = (np.hypot(*GRID.xy_m) < 2.1) & (np.hypot(*GRID.xy_m) > 0.6)
 
 
 def _single_layer(height_m, speed, direction_deg, n_steps=200, radius_m=4.0, seed=3):
@@ -19,12 +18,20 @@ def _single_layer(height_m, speed, direction_deg, n_steps=200, radius_m=4.0, see
     return layer, ScreenSet.from_screens([spec], [screen]), screen
 
 
-def test_plane_screen_is_sampled_exactly_on_and_off_axis_with_cone_and_wind():
+def _annulus(grid):
+    r = np.hypot(*grid.xy_m)
+    return (r < 2.1) & (r > 0.6)
+
+
+@pytest.mark.parametrize("grid", [GRID, PupilGrid(23, 4.2 / 23)], ids=["even", "odd"])
+def test_plane_screen_is_sampled_exactly_on_and_off_axis_with_cone_and_wind(grid):
     """A screen linear in position is reproduced exactly by bilinear interpolation,
     so this checks every geometric step: the skewed strip's line offsets and
     major axis, origin, sample spacing, frozen-flow shift, cone scaling,
-    off-axis and grid offsets, for winds closer to x and to y."""
+    off-axis and grid offsets, for winds closer to x and to y; lines go in
+    pairs, so an odd grid too."""
     a, b = 0.7, -1.3  # rad per m along sky x and y
+    annulus = _annulus(grid)
     for direction in (57.0, 160.0, 231.0, -20.0):
         layer, screens, _ = _single_layer(5000.0, 13.0, direction, n_steps=3000)  # 98 m of flow
         spec = screens.specs[0]
@@ -36,10 +43,10 @@ def test_plane_screen_is_sampled_exactly_on_and_off_axis_with_cone_and_wind():
         lgs = LineOfSight(2e-5, -4e-5, 22000.0)
         star = LineOfSight(-1e-4, 5e-5)
         centre = (0.3, -0.2)
-        prop = Propagator([layer], plane, [star, lgs], GRID, centre_xy_m=centre)
-        x, y = GRID.xy_m
+        prop = Propagator([layer], plane, [star, lgs], grid, centre_xy_m=centre)
+        x, y = grid.xy_m
         e = layer.wind_unit
-        masked = Propagator([layer], plane, [star, lgs], GRID, centre_xy_m=centre, mask=ANNULUS)
+        masked = Propagator([layer], plane, [star, lgs], grid, centre_xy_m=centre, mask=annulus)
         for step in (0, 13, 2999):
             phase = prop.sample([step], [[1.0]])[0]
             for d, los in enumerate((star, lgs)):
@@ -47,8 +54,8 @@ def test_plane_screen_is_sampled_exactly_on_and_off_axis_with_cone_and_wind():
                 qx, qy = fx - e[0] * 13.0 * DT_S * step, fy - e[1] * 13.0 * DT_S * step
                 np.testing.assert_allclose(phase[d], a * qx + b * qy, atol=2e-3)
             # a mask computes only its samples, zero elsewhere; sample_valid packs them in mask order
-            np.testing.assert_array_equal(masked.sample([step], [[1.0]])[0], np.where(ANNULUS, phase, 0.0))
-            np.testing.assert_array_equal(masked.sample_valid([step], [[1.0]])[0], phase[:, ANNULUS])
+            np.testing.assert_array_equal(masked.sample([step], [[1.0]])[0], np.where(annulus, phase, 0.0))
+            np.testing.assert_array_equal(masked.sample_valid([step], [[1.0]])[0], phase[:, annulus])
 
 
 def test_frozen_flow_moves_the_screen_by_the_wind_vector():
@@ -94,7 +101,7 @@ def test_steps_sampled_together_equal_steps_sampled_one_by_one():
     screens = ScreenSet.from_screens(s1.specs + s2.specs, [screen1, screen2])
     assert {spec.major_axis for spec in screens.specs} == {0, 1}
     prop = Propagator([l1, l2], screens, [LineOfSight(1e-5, 0.0), LineOfSight(0.0, 2e-5, 22000.0)], GRID,
-                      mask=ANNULUS)
+                      mask=_annulus(GRID))
     steps, scales = [3, 4, 11], [[1.0, 2.0], [0.5, 1.5], [3.0, 0.2]]
     together = prop.sample_valid(steps, scales)
     for step, scale, phase in zip(steps, scales, together):

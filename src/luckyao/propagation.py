@@ -54,16 +54,18 @@ def _sample_kernel(screens, starts, n_major, n_minor, skew, major_axis, flow, u0
     [samples], point ``b`` on it at minor ``w = w0[d, l] - step flow[l, 1] +
     beta[d, l] b``. Lines are grid rows (y) when the major axis is y, else
     columns. Per line the two screen lines ``floor(u)`` and ``+1`` are
-    contiguous: they are interpolated first, into ``between``; the minor taps
-    and weights are shared by all lines. Only the mask's runs are computed:
-    ``runs[ptr[a]:ptr[a + 1]]`` are the (start, end) of line ``a``'s runs.
-    Footprints stay on the screens (checked by the caller), so every index is
-    non-negative: indices are unsigned, which spares the wraparound code.
+    contiguous: they are interpolated first (vectorised), into ``between``;
+    then the minor taps and weights, shared by all lines, are applied to two
+    lines at a time. Only the mask's samples are computed: ``runs[ptr[p]:ptr[p + 1]]``
+    are the (start, end, lines) runs of line pair ``p`` (lines 1: the first,
+    2: the second, 3: both; :func:`_pair_runs`). Footprints stay on the screens
+    (checked by the caller), so every index is non-negative: indices are
+    unsigned, which spares the wraparound code.
     """
     n_steps, n_dir, n, _ = out.shape
     tap = np.empty(n, np.uint64)
     weight = np.empty(n, np.float32)
-    between = np.empty(int(beta.max() * n) + 4, np.float32)  # taps reach beta (n - 1) + 2
+    between = np.empty((2, int(beta.max() * n) + 4), np.float32)  # taps reach beta (n - 1) + 2
     out[:] = 0.0
     for l in range(starts.shape[0]):  # layer-major: footprints of one layer share cached screen lines
         if major_axis[l] == 1:  # lines are rows, points along x
@@ -71,6 +73,7 @@ def _sample_kernel(screens, starts, n_major, n_minor, skew, major_axis, flow, u0
         else:  # lines are columns: a column's points are n apart, its neighbours share cache lines
             runs, ptr, line_stride, point_stride = column_runs, column_ptr, 1, n
         m, k, n_lines = n_minor[l], skew[l], n_major[l]
+        stride = _U(point_stride)
         for s in range(n_steps):
             scale = np.float32(layer_scales[s, l])
             for d in range(n_dir):
@@ -83,26 +86,41 @@ def _sample_kernel(screens, starts, n_major, n_minor, skew, major_axis, flow, u0
                     j = np.uint64(w)
                     tap[b] = j
                     weight[b] = np.float32(w - j)
-                for a in range(n):
-                    if ptr[a + 1] == ptr[a]:
+                for p in range(ptr.size - 1):
+                    if ptr[p + 1] == ptr[p]:
                         continue
-                    u = u_first + beta[d, l] * a
-                    i = np.int64(u)
-                    f = np.float32(u - i)
-                    near = _U(starts[l] + i * m - (k * i) // n_lines + np.int64(first))
-                    far = _U(starts[l] + (i + 1) * m - (k * (i + 1)) // n_lines + np.int64(first))
-                    g_near = scale * (np.float32(1.0) - f)
-                    g_far = scale * f
-                    line = _U(a * line_stride)
-                    stride = _U(point_stride)
-                    # along the major axis first: contiguous, vectorised; then the minor taps
-                    for j in range(tap[runs[ptr[a], 0]], tap[runs[ptr[a + 1] - 1, 1] - 1] + _U(2)):
-                        between[j] = g_near * screens[near + j] + g_far * screens[far + j]
-                    for r in range(ptr[a], ptr[a + 1]):
-                        for b in range(_U(runs[r, 0]), _U(runs[r, 1])):
-                            t, c = tap[b], weight[b]
-                            s0, s1 = between[t], between[t + _U(1)]
-                            grid[line + b * stride] += s0 + c * (s1 - s0)
+                    j_lo = tap[runs[ptr[p], 0]]
+                    j_hi = tap[runs[ptr[p + 1] - 1, 1] - 1] + _U(2)
+                    for h in range(min(2, n - 2 * p)):  # along the major axis first
+                        u = u_first + beta[d, l] * (2 * p + h)
+                        i = np.int64(u)
+                        f = np.float32(u - i)
+                        near = _U(starts[l] + i * m - (k * i) // n_lines + np.int64(first))
+                        far = _U(starts[l] + (i + 1) * m - (k * (i + 1)) // n_lines + np.int64(first))
+                        g_near = scale * (np.float32(1.0) - f)
+                        g_far = scale * f
+                        line = between[h]
+                        for j in range(j_lo, j_hi):
+                            line[j] = g_near * screens[near + j] + g_far * screens[far + j]
+                    first_line, second_line = between[0], between[1]
+                    o0 = _U(2 * p * line_stride)
+                    o1 = o0 + _U(line_stride)
+                    for r in range(ptr[p], ptr[p + 1]):  # then the minor taps, shared by the pair
+                        lines = runs[r, 2]
+                        if lines == 3:
+                            for b in range(_U(runs[r, 0]), _U(runs[r, 1])):
+                                t, c = tap[b], weight[b]
+                                s0, s1 = first_line[t], first_line[t + _U(1)]
+                                q0, q1 = second_line[t], second_line[t + _U(1)]
+                                grid[o0 + b * stride] += s0 + c * (s1 - s0)
+                                grid[o1 + b * stride] += q0 + c * (q1 - q0)
+                        else:
+                            values = first_line if lines == 1 else second_line
+                            o = o0 if lines == 1 else o1
+                            for b in range(_U(runs[r, 0]), _U(runs[r, 1])):
+                                t, c = tap[b], weight[b]
+                                s0, s1 = values[t], values[t + _U(1)]
+                                grid[o + b * stride] += s0 + c * (s1 - s0)
 
 
 @numba.njit(cache=True, nogil=True)
@@ -159,6 +177,8 @@ class Propagator:
         mask = np.ones((n, n), bool) if mask is None else np.asarray(mask, bool)
         self._row_runs = _runs(mask)
         self._column_runs = _runs(mask.T)
+        self._row_pairs = _pair_runs(mask)
+        self._column_pairs = _pair_runs(mask.T)
         self._screens = screens.flat
         self._starts = screens.starts
         self._n_major = np.array([s.n_major for s in specs], dtype=np.int64)
@@ -225,7 +245,7 @@ class Propagator:
             raise ValueError(f"out must be C-contiguous float32 of shape {(len(steps), n_los, n, n)}")
         _sample_kernel(self._screens, self._starts, self._n_major, self._n_minor, self._skew, self._major_axis,
                        self._step, self._u0, self._w0, self._beta, steps, scales,
-                       *self._column_runs, *self._row_runs, out)
+                       *self._column_pairs, *self._row_pairs, out)
         return out
 
     def sample_valid(self, steps, layer_scales, out: np.ndarray | None = None) -> np.ndarray:
@@ -254,3 +274,18 @@ def _runs(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     _, ends = np.nonzero(edges == -1)
     ptr = np.searchsorted(rows_start, np.arange(mask.shape[0] + 1)).astype(np.int64)
     return np.stack([starts, ends], axis=1).astype(np.int64), ptr
+
+
+def _pair_runs(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Runs of the row pairs (2p, 2p + 1) of ``mask``: ``(runs, ptr)``, with pair
+    ``p``'s (start, end, lines) in ``runs[ptr[p]:ptr[p + 1]]``; ``lines`` is 1
+    where only row 2p is true, 2 where only row 2p + 1 is, 3 where both are."""
+    rows = np.pad(mask.astype(np.int8), ((0, mask.shape[0] % 2), (0, 0)))
+    code = np.pad(rows[0::2] + 2 * rows[1::2], ((0, 0), (1, 1)))  # (pair, 1 + x + 1)
+    pair, x = np.nonzero(code[:, 1:] != code[:, :-1])  # the code changes before x
+    same = pair[1:] == pair[:-1]
+    pair, start, end = pair[:-1][same], x[:-1][same], x[1:][same]
+    lines = code[pair, start + 1]
+    keep = lines > 0
+    ptr = np.searchsorted(pair[keep], np.arange(code.shape[0] + 1)).astype(np.int64)
+    return np.stack([start[keep], end[keep], lines[keep]], axis=1).astype(np.int64), ptr
