@@ -1,6 +1,5 @@
 """Shack-Hartmann WFS against geometry and diffraction theory."""
 
-import numba
 import numpy as np
 import pytest
 
@@ -9,7 +8,6 @@ from luckyao.lgs import LgsConfig
 from luckyao.pupil import Telescope
 from luckyao.units import ARCSEC_RAD
 from luckyao import wfs as sh
-from luckyao.wfs_kernel import sincos
 
 TELESCOPE = Telescope(4.2, 1.2)
 WAVELENGTH_M = 532e-9
@@ -271,21 +269,6 @@ def test_writable_elongation_is_read_at_every_call():
     writable[:] = 1.0
     np.testing.assert_array_equal(sh.exposure_images(wfs, phase, WAVELENGTH_M, writable),
                                   sh.exposure_images(wfs, phase, WAVELENGTH_M))
-
-
-def test_float32_sincos_is_accurate_to_one_ulp():
-    x = np.concatenate([np.linspace(-10, 10, 20001),
-                        np.random.default_rng(0).uniform(-6000, 6000, 20000)]).astype(np.float32)
-
-    @numba.njit
-    def both(x, cos_x, sin_x):
-        for i in range(x.size):
-            cos_x[i], sin_x[i] = sincos(x[i])
-
-    cos_x, sin_x = np.empty_like(x), np.empty_like(x)
-    both(x, cos_x, sin_x)
-    np.testing.assert_allclose(cos_x, np.cos(x.astype(float)), rtol=0, atol=1e-7)
-    np.testing.assert_allclose(sin_x, np.sin(x.astype(float)), rtol=0, atol=1e-7)
 
 
 @pytest.mark.parametrize("n_fft, n_in, n_out", [(32, 16, 32), (32, 32, 23), (16, 8, 16), (8, 3, 5)])

@@ -24,16 +24,9 @@ import numba
 import numpy as np
 import pyfftw
 
-from .wfs_kernel import sincos
+from .sincos import cos_sin
 
 _BLOCK_ROWS = 64  # rows of the second pass per FFT call: 2 x 128 kB of buffers at M = 256
-
-
-@numba.njit(cache=True, nogil=True, fastmath={"contract"})
-def _cos_sin(phase, cos, sin):  # pragma: no cover (jit)
-    """cos[i], sin[i] of phase[i] (a vectorised polynomial, as accurate as numpy's in float32)."""
-    for i in range(phase.size):
-        cos[i], sin[i] = sincos(phase[i])
 
 
 @numba.njit(cache=True, nogil=True)
@@ -87,7 +80,7 @@ class FarField:
         if out.shape != (len(phase_rad), m, m) or out.dtype != np.float32:
             raise ValueError(f"out must be float32 of shape {(len(phase_rad), m, m)}")
         for phase, image in zip(phase_rad, out):
-            _cos_sin(phase, self._cos, self._sin)
+            cos_sin(phase, self._cos, self._sin)
             _scatter(self._cos, self._sin, self._sample, self._index, self._field_flat)
             self._fft_y.execute()
             for row0, source, head in self._blocks:

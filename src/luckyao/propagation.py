@@ -36,7 +36,7 @@ def footprint_m(points_x_m, points_y_m, layer_height_m, los: LineOfSight):
             scale * np.asarray(points_y_m) + los.theta_y_rad * layer_height_m)
 
 
-_U = numba.uint64  # unsigned indices: no negative-index wraparound, faster gathers
+_U = numba.uint64  # unsigned indices: numba emits no negative-index wraparound code
 
 
 @numba.njit(cache=True, fastmath=True, nogil=True)
@@ -267,13 +267,8 @@ class Propagator:
 
 def _runs(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Runs of true samples of each row of ``mask``: ``(runs, ptr)``, with row
-    ``a``'s (start, end) pairs in ``runs[ptr[a]:ptr[a + 1]]``."""
-    padded = np.pad(mask.astype(np.int8), ((0, 0), (1, 1)))
-    edges = np.diff(padded, axis=1)
-    rows_start, starts = np.nonzero(edges == 1)
-    _, ends = np.nonzero(edges == -1)
-    ptr = np.searchsorted(rows_start, np.arange(mask.shape[0] + 1)).astype(np.int64)
-    return np.stack([starts, ends], axis=1).astype(np.int64), ptr
+    ``a``'s (start, end, 1) in ``runs[ptr[a]:ptr[a + 1]]``."""
+    return _code_runs(mask.astype(np.int8))
 
 
 def _pair_runs(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -281,11 +276,17 @@ def _pair_runs(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     ``p``'s (start, end, lines) in ``runs[ptr[p]:ptr[p + 1]]``; ``lines`` is 1
     where only row 2p is true, 2 where only row 2p + 1 is, 3 where both are."""
     rows = np.pad(mask.astype(np.int8), ((0, mask.shape[0] % 2), (0, 0)))
-    code = np.pad(rows[0::2] + 2 * rows[1::2], ((0, 0), (1, 1)))  # (pair, 1 + x + 1)
-    pair, x = np.nonzero(code[:, 1:] != code[:, :-1])  # the code changes before x
-    same = pair[1:] == pair[:-1]
-    pair, start, end = pair[:-1][same], x[:-1][same], x[1:][same]
-    lines = code[pair, start + 1]
-    keep = lines > 0
-    ptr = np.searchsorted(pair[keep], np.arange(code.shape[0] + 1)).astype(np.int64)
-    return np.stack([start[keep], end[keep], lines[keep]], axis=1).astype(np.int64), ptr
+    return _code_runs(rows[0::2] + 2 * rows[1::2])
+
+
+def _code_runs(code: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Runs of equal non-zero values along each row of ``code``: ``(runs, ptr)``,
+    with row ``a``'s (start, end, value) in ``runs[ptr[a]:ptr[a + 1]]``."""
+    padded = np.pad(code, ((0, 0), (1, 1)))
+    row, x = np.nonzero(padded[:, 1:] != padded[:, :-1])  # the value changes before x
+    same = row[1:] == row[:-1]
+    row, start, end = row[:-1][same], x[:-1][same], x[1:][same]
+    value = padded[row, start + 1]
+    keep = value > 0
+    ptr = np.searchsorted(row[keep], np.arange(code.shape[0] + 1)).astype(np.int64)
+    return np.stack([start[keep], end[keep], value[keep]], axis=1).astype(np.int64), ptr

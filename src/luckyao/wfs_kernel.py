@@ -23,59 +23,31 @@ straight-line code generated per size (:mod:`luckyao.codelets`, cached on
 disk); the rest is plain numba, with small per-size drivers.
 """
 
-import hashlib
-import inspect
-import math
 from functools import cache
 
 import numba
 import numpy as np
 
 from .codelets import Codelet, dft, load_module, term_value
+from .sincos import SINCOS_DIGEST
 
 _U = numba.uint64  # unsigned offsets keep the lane loops vectorisable
 _FASTMATH = {"contract"}  # fused multiply-adds; no reassociation
 _LAG_GROUP = 8  # lags accumulated together in registers by the autocorrelation
 
-# sin and cos on |r| <= pi/4 (Taylor to r^9 and r^10: truncation < 2e-9)
-_TWO_OVER_PI = np.float32(2 / np.pi)
-_ROUND = np.float32(1.5 * 2**23)  # x + _ROUND - _ROUND rounds to an integer for |x| < 2^22
-# pi/2 = _PI_2A + _PI_2B + _PI_2C, the first two of 8 and 12 significant bits:
-# k _PI_2A and k _PI_2B are exact in float32 for |k| < 2^12 (Cody & Waite 1980)
-_PI_2A = np.float32(1.5703125)
-_PI_2B = np.float32(math.ldexp(round(math.ldexp(math.pi / 2 - 1.5703125, 23)), -23))
-_PI_2C = np.float32(math.pi / 2 - float(_PI_2A) - float(_PI_2B))
-_S3, _S5, _S7, _S9 = (np.float32((-1) ** k / math.factorial(2 * k + 1)) for k in range(1, 5))
-_C2, _C4, _C6, _C8, _C10 = (np.float32((-1) ** k / math.factorial(2 * k)) for k in range(1, 6))
-
-
-@numba.njit(inline="always", fastmath=_FASTMATH)
-def sincos(x):  # pragma: no cover (jit)
-    """``(cos x, sin x)`` of a float32 ``x``, to ~1 ulp for |x| < 6000 (the
-    reduction ``r = x - k pi/2`` adds ~1e-11 |x| beyond)."""
-    k = (x * _TWO_OVER_PI + _ROUND) - _ROUND
-    r = ((x - k * _PI_2A) - k * _PI_2B) - k * _PI_2C
-    r2 = r * r
-    s = r + r * r2 * (_S3 + r2 * (_S5 + r2 * (_S7 + r2 * _S9)))
-    c = np.float32(1.0) + r2 * (_C2 + r2 * (_C4 + r2 * (_C6 + r2 * (_C8 + r2 * _C10))))
-    quadrant = np.int32(k)
-    swap = (quadrant & 1) == 1
-    cos_x = s if swap else c
-    sin_x = c if swap else s
-    cos_x = -cos_x if (quadrant + 1) & 2 else cos_x
-    sin_x = -sin_x if quadrant & 2 else sin_x
-    return cos_x, sin_x
-
-
-# the generated kernels inline sincos: their source (so file and numba cache) follows it
-_SINCOS_DIGEST = hashlib.sha256(repr((
-    inspect.getsource(sincos.py_func), _TWO_OVER_PI, _ROUND, _PI_2A, _PI_2B, _PI_2C,
-    _S3, _S5, _S7, _S9, _C2, _C4, _C6, _C8, _C10)).encode()).hexdigest()[:16]
-
-
 # --- generated straight-line kernels ---------------------------------------------
 # Complex arrays are one float32 array, real parts then imaginary parts: few
 # distinct arrays keep LLVM's run-time alias checks, hence vectorisation, possible.
+def _stored(codelet: Codelet, values, array: str, offset: str, stride: int, im_offset: int) -> list[str]:
+    """Lines computing the codelet's complex ``values`` and storing value ``i`` at
+    ``array[offset + i stride]`` (real part) and ``+ im_offset`` (imaginary part)."""
+    lines = codelet.source([t for v in values for t in v], " " * 12)
+    for i, (re, im) in enumerate(values):
+        lines += [f"            {array}[{offset} + {i * stride}] = {term_value(re)}",
+                  f"            {array}[{offset} + {im_offset + i * stride}] = {term_value(im)}"]
+    return lines
+
+
 def _columns_source(n_fft: int, n_in: int, lanes: int) -> tuple[list[str], dict]:
     """Fields and their y DFTs ``g[x, ky, l] = sum_{y < n_in} f[x, y, l] exp(-2 pi i ky y / N)``,
     ``f = amp exp(i ratio phi)`` with ``amp``, ``phi`` (x, y, L) (pruned DFT)."""
@@ -93,11 +65,7 @@ def _columns_source(n_fft: int, n_in: int, lanes: int) -> tuple[list[str], dict]
         lines += [f"            c{y}, s{y} = sincos(phi[o + {y * lanes}] * ratio)",
                   f"            fr{y} = amp[o + {y * lanes}] * c{y}",
                   f"            fi{y} = amp[o + {y * lanes}] * s{y}"]
-    lines += codelet.source([t for v in spectrum for t in v], " " * 12)
-    for ky, (re, im_part) in enumerate(spectrum):
-        lines += [f"            g[og + {ky * lanes}] = {term_value(re)}",
-                  f"            g[og + {im + ky * lanes}] = {term_value(im_part)}"]
-    return lines, codelet.constants
+    return lines + _stored(codelet, spectrum, "g", "og", lanes, im), codelet.constants
 
 
 def _correlate_source(n_fft: int, n_in: int, lanes: int, n_lags: int) -> tuple[list[str], dict]:
@@ -158,11 +126,7 @@ def _spectrum_source(n_fft: int, lanes: int, n_lags: int) -> tuple[list[str], di
     for k in range(n_fft):
         lines += [f"            hr{k} = h[o + {k * row}]",
                   f"            hi{k} = h[o + {h_im + k * row}]"]
-    lines += codelet.source([t for v in wanted for t in v], " " * 12)
-    for i, (re, im) in enumerate(wanted):
-        lines += [f"            c[o + {i * row}] = {term_value(re)}",
-                  f"            c[o + {c_im + i * row}] = {term_value(im)}"]
-    return lines, codelet.constants
+    return lines + _stored(codelet, wanted, "c", "o", row, c_im), codelet.constants
 
 
 def _pixels_source(lanes: int, n_lags: int, n_pix: int) -> tuple[list[str], dict]:
@@ -220,7 +184,7 @@ def _generated(name: str, *size: int):
     lines = ['"""Generated by luckyao.wfs_kernel; do not edit."""', "import numba",
              "import numpy as np"]
     if any("sincos(" in line for line in source):
-        lines += [f"from luckyao.wfs_kernel import sincos  # {_SINCOS_DIGEST}"]
+        lines += [f"from luckyao.sincos import sincos  # {SINCOS_DIGEST}"]
     lines += ["", "_U = numba.uint64"]
     lines += [f"{constant} = np.float32({float(value)!r})" for constant, value in constants.items()]
     lines += ["", "", f"@numba.njit(cache=True, nogil=True, fastmath={_FASTMATH!r})"] + source
