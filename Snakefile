@@ -1,7 +1,10 @@
 # luckyao: every figure of the study from one command.
-#   snakemake                                   # the default (quick) study, config/config.yaml
-#   snakemake --config study=config/paper.yaml  # paper fidelity
-# The study config is validated (workflow/schemas/config.schema.yaml) before any job runs.
+#   snakemake                                    # the default (quick) study, config/config.yaml
+#   snakemake --configfile config/paper.yaml     # paper fidelity: an overlay of what differs
+# The study config is validated (src/luckyao/study/config.schema.yaml) before any job runs.
+
+configfile: "config/config.yaml"
+
 
 include: "workflow/rules/common.smk"
 include: "workflow/rules/turbulence.smk"

@@ -3,7 +3,7 @@
 Reports ms per 2.5 ms simulation step for the WFS stage (4 LGS x 8x8, both
 time-steps' images of a 5 ms exposure, elongation and uplink, centroiding;
 cost of one exposure / 2), with its stages in ms per exposure (the compiled
-kernels of luckyao.wfs_kernel), and for the reconstruction (slopes -> projected,
+kernels of luckyao.wfs.kernels), and for the reconstruction (slopes -> projected,
 tilt-removed phase -> rms; one per exposure / 2), then the reconstructor
 build times and peak memory for 8x8, 16x16 and 32x32 (each build in a fresh
 subprocess so its peak RSS is its own).
@@ -20,21 +20,23 @@ import resource  # noqa: E402
 import subprocess  # noqa: E402
 import sys  # noqa: E402
 import time  # noqa: E402
+from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from luckyao.lgs import LgsConfig  # noqa: E402
-from luckyao.pupil import Telescope  # noqa: E402
-from luckyao import tomography as tomo  # noqa: E402
-from luckyao import wfs as sh  # noqa: E402
-from luckyao import wfs_kernel as wk  # noqa: E402
-from luckyao.units import ARCSEC_RAD  # noqa: E402
+from luckyao.study.case import telescope_from, tomography_from  # noqa: E402
+from luckyao.study.config import load_study  # noqa: E402
+from luckyao.tomography.criterion import lgs_rms_nm  # noqa: E402
+from luckyao.tomography.reconstructor import factorize, pupil_points, target_reconstructor  # noqa: E402
+from luckyao.tomography.slopes import SlopeGeometry, slope_covariance  # noqa: E402
+from luckyao.wfs import kernels as wk  # noqa: E402
+from luckyao.wfs import shack_hartmann as sh  # noqa: E402
+from luckyao.wfs.beacons import LgsConfig  # noqa: E402
 
-TELESCOPE = Telescope(4.2, 1.2)
-PRIOR = tomo.TurbulencePrior(
-    0.135, 20.0, (47, 140, 281, 562, 1125, 2250, 4500, 9000, 18000),
-    (0.5224, 0.0260, 0.0444, 0.1160, 0.0989, 0.0295, 0.0598, 0.0430, 0.0600))
-NOISE_RAD = 0.02 * ARCSEC_RAD
+BASE = load_study(Path(__file__).resolve().parents[1] / "config" / "config.yaml")[0]["base"]
+TELESCOPE = telescope_from(BASE["telescope"])
+PRIOR = tomography_from(BASE["tomography"]).prior  # the study's default system
+NOISE_RAD = tomography_from(BASE["tomography"]).noise_rms_rad
 
 
 def best_ms(function, repeat=7, number=20):
@@ -51,12 +53,12 @@ def best_ms(function, repeat=7, number=20):
 def build(n_sub: int) -> None:
     lgs = LgsConfig.rayleigh()
     wfs = sh.ShackHartmann(TELESCOPE, n_sub, lgs.wavelength_m)
-    geometry = tomo.SlopeGeometry.from_wfs(wfs, lgs)
-    points = tomo.pupil_points(TELESCOPE, wfs.subaperture_m / 2)[2]
+    geometry = SlopeGeometry.from_wfs(wfs, lgs)
+    points = pupil_points(TELESCOPE, wfs.subaperture_m / 2)[2]
     start = time.perf_counter()
-    factor = tomo.factorize(tomo.slope_covariance(PRIOR, geometry, NOISE_RAD))
+    factor = factorize(slope_covariance(PRIOR, geometry, NOISE_RAD))
     middle = time.perf_counter()
-    tomo.target_reconstructor(PRIOR, geometry, NOISE_RAD, points, cholesky_lower=factor)
+    target_reconstructor(PRIOR, geometry, NOISE_RAD, points, cholesky_lower=factor)
     end = time.perf_counter()
     peak_gb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6
     print(f"build {n_sub}x{n_sub}: {geometry.n_slopes} slopes, {len(points)} target points: "
@@ -72,15 +74,15 @@ def per_step() -> None:
     n = wfs.grid.n_pix
     downlink = rng.normal(0, 2, (2, lgs.n_beacons, n, n)).astype(np.float32)
     uplink = rng.normal(0, 1, (2, lgs.n_beacons) + wfs.launch_grid.xy_m[0].shape).astype(np.float32)
-    geometry = tomo.SlopeGeometry.from_wfs(wfs, lgs)
-    points = tomo.pupil_points(TELESCOPE, wfs.subaperture_m / 2)[2]
-    rec = tomo.target_reconstructor(PRIOR, geometry, NOISE_RAD, points)
+    geometry = SlopeGeometry.from_wfs(wfs, lgs)
+    points = pupil_points(TELESCOPE, wfs.subaperture_m / 2)[2]
+    rec = target_reconstructor(PRIOR, geometry, NOISE_RAD, points)
     slopes = sh.measure_slopes(wfs, downlink, 500e-9, elongation, uplink)
 
     t_wfs = best_ms(lambda: sh.measure_slopes(wfs, downlink, 500e-9, elongation, uplink))
     t_images = best_ms(lambda: sh.exposure_images(wfs, downlink, 500e-9, elongation, uplink))
     images = sh.exposure_images(wfs, downlink, 500e-9, elongation, uplink)
-    t_rec = best_ms(lambda: tomo.lgs_rms_nm(rec, slopes), number=200)
+    t_rec = best_ms(lambda: lgs_rms_nm(rec, slopes), number=200)
     print(f"WFS 4 LGS x 8x8 ({wfs.n_valid} valid, n_s={wfs.samples_per_subaperture}, "
           f"M={wfs.fft_size}): {t_wfs:.2f} ms per 5 ms exposure (images {t_images:.2f}) "
           f"= {t_wfs / 2:.2f} ms per 2.5 ms step")

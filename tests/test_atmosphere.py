@@ -3,8 +3,14 @@
 import numpy as np
 import pytest
 
-from luckyao.atmosphere import (Layer, R0Schedule, r0_at_wavelength, strip_screen,
-                                strip_spec, von_karman_psd, von_karman_structure_function)
+from luckyao.atmosphere.screens import strip_screen, strip_spec
+from luckyao.atmosphere.statistics import (
+    Layer,
+    R0Schedule,
+    r0_at_wavelength,
+    von_karman_psd,
+    von_karman_structure_function,
+)
 
 L0_M = 20.0
 DX_M = 0.05
@@ -23,7 +29,7 @@ def test_structure_function_is_the_transform_of_the_psd():
     from scipy.integrate import quad
     from scipy.special import j0
 
-    from luckyao.atmosphere import _VK_COEFFICIENT
+    from luckyao.atmosphere.statistics import _VK_COEFFICIENT
 
     r0, outer_scale = 0.15, L0_M
     for r in (0.1, 1.0, 4.2, 30.0):

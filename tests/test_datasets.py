@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from luckyao.config import sha256
-from luckyao.datasets import FrameWriter, iter_frame_blocks, open_dataset, provenance, write_dataset
+from luckyao.study.config import sha256
+from luckyao.study.datasets import FrameWriter, iter_frame_blocks, open_dataset, provenance, write_dataset
 
 
 def test_provenance_carries_config_hash_version_and_seed():

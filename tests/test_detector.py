@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from luckyao.detector import Detector, apply_detector
+from luckyao.lucky.detector import Detector, apply_detector
 
 
 def two_level_frames(k, n=64):

@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from luckyao.farfield import FarField
-from luckyao.pupil import Telescope
+from luckyao.optics.farfield import FarField
+from luckyao.optics.pupil import Telescope
 
 
 @pytest.mark.parametrize("n_pix, fft_size", [(128, 256), (82, 300)])  # 300: last row block partial

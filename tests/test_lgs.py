@@ -2,9 +2,9 @@
 
 import numpy as np
 
-from luckyao.lgs import (LgsConfig, altitude_profile, cone_coordinates, elongation_length_rad,
-                         elongation_offsets_rad, footprint_scale)
+from luckyao.geometry import cone_coordinates, footprint_scale
 from luckyao.units import ARCSEC_RAD
+from luckyao.wfs.beacons import LgsConfig, altitude_profile, elongation_length_rad, elongation_offsets_rad
 
 
 def test_asterism_is_a_40_arcsec_circle():
@@ -32,8 +32,7 @@ def test_cone_footprint_matches_ray_geometry():
         np.testing.assert_allclose(centre, theta * height, atol=1e-9)
         diameter = 2 * np.hypot(x_l - centre[0], y_l - centre[1])
         np.testing.assert_allclose(diameter, 4.2 * (1 - height / config.height_m))
-        np.testing.assert_allclose(footprint_scale(height, config.height_m),
-                                   1 - height / config.height_m)
+        np.testing.assert_allclose(footprint_scale(height, config.height_m), diameter / 4.2)
     # a star (H = inf) keeps the full pupil, shifted by theta h
     x_l, _ = cone_coordinates(edge[:, 0], edge[:, 1], 9000.0, np.inf, theta)
     np.testing.assert_allclose(x_l, edge[:, 0] + theta[0] * 9000.0)

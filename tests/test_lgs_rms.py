@@ -2,13 +2,12 @@
 
 import numpy as np
 
-from luckyao.atmosphere import strip_screen
-from luckyao.config import load_study, reconstructor_spec, turbulence_spec
-from luckyao.propagation import ScreenSet
-from luckyao.reconstructor import build_reconstructors
-from luckyao.sensing import LgsSensing
-from luckyao.simulate import System, simulate
-from luckyao.turbulence import strip_specs
+from luckyao.atmosphere.screens import ScreenSet, strip_screen
+from luckyao.study.case import Case
+from luckyao.study.config import load_study, reconstructor_spec, turbulence_spec
+from luckyao.study.reconstructor import build_reconstructors
+from luckyao.study.simulation import lgs_chain, simulate
+from luckyao.study.turbulence import strip_specs
 
 
 def test_lgs_rms_correlates_with_the_true_rms():
@@ -26,9 +25,9 @@ def test_lgs_rms_correlates_with_the_true_rms():
     screens = ScreenSet.from_screens(
         specs, [strip_screen(s, spec["outer_scale_m"], np.random.default_rng([5, i])) for i, s in enumerate(specs)])
     reconstructors = build_reconstructors(reconstructor_spec(case))["reconstructor"].values
-    system = System.from_config(case)
-    sensing = LgsSensing(case, list(system.layers), screens, reconstructors, seed=5)
-    telemetry = simulate(system, screens, lambda start, frames: None, sensing)
+    system = Case.from_config(case)
+    sensor, estimator = lgs_chain(system, screens, reconstructors, seed=5)
+    telemetry = simulate(system, screens, lambda start, frames: None, sensor, estimator)
     lgs = telemetry.lgs_rms_nm.values[0]
     true = telemetry.true_rms_nm.values[0]
     assert np.all(np.isfinite(lgs)) and np.all(lgs > 0)

@@ -1,27 +1,30 @@
 """Uncorrected long-exposure Strehl from the full simulation vs the analytic
 value, telescope OTF x exp(-D_phi/2) (Roddier 1981)."""
 
-import numpy as np
+from pathlib import Path
 
-from luckyao.analytic import long_exposure_strehl
-from luckyao.atmosphere import strip_screen
-from luckyao.imaging import Imager
-from luckyao.postprocess import batch_mean_error
-from luckyao.propagation import ScreenSet
-from luckyao.simulate import System, simulate
-from luckyao.turbulence import strip_specs
+import numpy as np
+import yaml
+
+from luckyao.atmosphere.screens import ScreenSet, strip_screen
+from luckyao.optics.imaging import Imager
+from luckyao.optics.long_exposure import long_exposure_strehl
+from luckyao.study.case import Case
+from luckyao.study.config import deep_merge
+from luckyao.study.postprocess import batch_mean_error
+from luckyao.study.simulation import simulate
+from luckyao.study.turbulence import strip_specs
 
 # A 1 m telescope and three fast layers, so 20 s of frozen flow cross ~150 outer
 # scales: the Monte-Carlo error of the long exposure is a few percent.
-CASE = {
-    "duration_s": 20.0, "time_step_s": 0.0025,
+CASE = deep_merge(yaml.safe_load((Path(__file__).parent / "data" / "tiny.yaml").read_text())["base"], {
+    "duration_s": 20.0,
     "telescope": {"diameter_m": 1.0, "obscuration_m": 0.3},
-    "atmosphere": {"r0_500nm_m": 0.1, "r0_amplitude_m": 0.0, "r0_period_s": 1.0, "outer_scale_m": 20.0,
+    "atmosphere": {"r0_500nm_m": 0.1, "outer_scale_m": 20.0,
                    "height_m": [0.0, 5000.0, 10000.0], "cn2_fraction": [0.4, 0.3, 0.3],
                    "wind_speed_m_s": [40.0, 50.0, 60.0], "wind_direction_deg": [0.0, 120.0, 240.0]},
     "camera": {"wavelength_m": 8e-7, "n_pixels": 64, "field_of_view_arcsec": 64 * 0.08, "frame_time_s": 0.01},
-    "targets_arcsec": [[0.0, 0.0]], "ao": {"mode": "none"},
-}
+})
 SPEC = {"seed": 1, "duration_s": 20.0, "max_pixel_m": 0.016, "field_radius_arcsec": 0.0,
         "min_along_m": 100.0, "min_across_m": 4.0, "time_step_s": 0.0025, "diameter_m": 1.0,
         "outer_scale_m": 20.0, "height_m": [0.0, 5000.0, 10000.0], "wind_speed_m_s": [40.0, 50.0, 60.0],
@@ -32,7 +35,7 @@ def test_uncorrected_long_exposure_strehl_matches_theory():
     specs = strip_specs(SPEC)
     screens = ScreenSet.from_screens(
         specs, [strip_screen(s, 20.0, np.random.default_rng([SPEC["seed"], i])) for i, s in enumerate(specs)])
-    system = System.from_config(CASE)
+    system = Case.from_config(CASE)
     total = np.zeros((64, 64))
 
     def accumulate(start, frames):

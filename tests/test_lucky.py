@@ -3,13 +3,20 @@
 import numpy as np
 import pytest
 
-from luckyao.detector import Detector, apply_detector
-from luckyao.imaging import Camera, Imager
-from luckyao.lucky import (ExternalCriterion, fraction_counts, rank_frames,
-                           recentring_shifts_px, run_lucky, selection_bins, shift_and_add,
-                           shift_frames)
-from luckyao.metrics import strehl
-from luckyao.pupil import Telescope
+from luckyao.lucky.detector import Detector, apply_detector
+from luckyao.lucky.metrics import strehl
+from luckyao.lucky.selection import (
+    ExternalCriterion,
+    fraction_counts,
+    rank_frames,
+    recentring_shifts_px,
+    run_lucky,
+    selection_bins,
+    shift_and_add,
+    shift_frames,
+)
+from luckyao.optics.imaging import Camera, Imager
+from luckyao.optics.pupil import Telescope
 
 
 def test_fraction_counts():

@@ -4,47 +4,56 @@ import numpy as np
 import pytest
 from scipy import integrate, optimize, special
 
-from luckyao.imaging import Camera, Imager
-from luckyao.metrics import EncircledEnergy, centroid_px, d50_arcsec, fwhm_arcsec, strehl
-from luckyao.pupil import Telescope, TiltRemover
+from luckyao.lucky.metrics import EncircledEnergy, centroid_px, d50_arcsec, fwhm_arcsec, strehl
+from luckyao.optics.imaging import Camera, Imager
+from luckyao.optics.pupil import Telescope, TiltRemover
 from luckyao.units import ARCSEC_RAD
 
 D_M, OBSCURATION_M = 4.2, 1.2
 EPS = OBSCURATION_M / D_M
 
 
-def annular_amplitude(x):
+def annular_amplitude(x, eps=EPS):
     """Obscured Airy amplitude 2J1(x)/x - eps^2 2J1(eps x)/(eps x), x = pi D theta / lambda."""
-    return 2 * special.j1(x) / x - EPS**2 * 2 * special.j1(EPS * x) / (EPS * x)
+    central = 2 * special.j1(eps * x) / (eps * x) if eps > 0 else 1.0
+    return 2 * special.j1(x) / x - eps**2 * central
 
 
-def airy_half_maximum_x():
+def airy_half_maximum_x(eps=EPS):
     """x at which the intensity falls to half its axial value (1 - eps^2)^2."""
-    return optimize.brentq(lambda x: (annular_amplitude(x) / (1 - EPS**2)) ** 2 - 0.5, 0.5, 2.5)
+    return optimize.brentq(lambda x: (annular_amplitude(x, eps) / (1 - eps**2)) ** 2 - 0.5, 0.5, 2.5)
 
 
-def airy_ee(x):
+def airy_ee(x, eps=EPS):
     """Encircled energy fraction within x: radial integral over the total 2 (1 - eps^2)."""
-    return integrate.quad(lambda t: annular_amplitude(t) ** 2 * t, 0, x, limit=200)[0] / (
-        2 * (1 - EPS**2))
+    return integrate.quad(lambda t: annular_amplitude(t, eps) ** 2 * t, 0, x, limit=200)[0] / (
+        2 * (1 - eps**2))
 
 
-def airy_ee_mahajan(x):
+def airy_ee_mahajan(x, eps=EPS):
     """Closed form of the annular encircled energy (Mahajan, JOSA A 3, 470, 1986, eq. 13)."""
-    tail = integrate.quad(lambda t: special.j1(t) * special.j1(EPS * t) / t, 0, x, limit=200)[0]
+    tail = integrate.quad(lambda t: special.j1(t) * special.j1(eps * t) / t, 0, x, limit=200)[0]
     return (1 - special.j0(x) ** 2 - special.j1(x) ** 2
-            + EPS**2 * (1 - special.j0(EPS * x) ** 2 - special.j1(EPS * x) ** 2)
-            - 4 * EPS * tail) / (1 - EPS**2)
+            + eps**2 * (1 - special.j0(eps * x) ** 2 - special.j1(eps * x) ** 2)
+            - 4 * eps * tail) / (1 - eps**2)
 
 
-def airy_d50_x():
-    return optimize.brentq(lambda x: airy_ee(x) - 0.5, 0.5, 5.0)
+def airy_d50_x(eps=EPS):
+    return optimize.brentq(lambda x: airy_ee(x, eps) - 0.5, 0.5, 5.0)
 
 
-def test_airy_theory_is_consistent():
-    """The radial integral agrees with Mahajan's closed form, so the d50 reference is right."""
+def test_airy_references_match_textbook_values():
+    """The references the metrics are held to, checked against published numbers:
+    unobscured Airy FWHM 1.029 lambda/D and 83.8 % of the energy inside the first
+    dark ring at x = 3.8317 (Born & Wolf, Principles of Optics, 8.5.2); with the
+    obscuration, the radial integral agrees with Mahajan's closed form, the core
+    narrows (FWHM below 1.029 lambda/D) and energy moves to the rings (d50 grows)."""
+    assert 2 * airy_half_maximum_x(0.0) / np.pi == pytest.approx(1.029, abs=5e-4)
+    assert airy_ee(3.8317, 0.0) == pytest.approx(0.838, abs=5e-4)
     for x in (1.0, airy_d50_x(), 4.0):
         assert airy_ee(x) == pytest.approx(airy_ee_mahajan(x), abs=1e-7)
+    assert airy_half_maximum_x() < airy_half_maximum_x(0.0)
+    assert airy_d50_x() > airy_d50_x(0.0)
 
 
 # Two samplings of the 800 nm image, both band-limited (Imager oversampling 1):

@@ -3,9 +3,11 @@
 import numpy as np
 import pytest
 
-from luckyao.atmosphere import Layer, strip_screen, strip_spec
-from luckyao.propagation import LineOfSight, Propagator, ScreenSet, footprint_m
-from luckyao.pupil import PupilGrid
+from luckyao.atmosphere.screens import ScreenSet, strip_screen, strip_spec
+from luckyao.atmosphere.statistics import Layer
+from luckyao.geometry import LineOfSight, footprint_m
+from luckyao.optics.propagation import Propagator
+from luckyao.optics.pupil import PupilGrid
 
 DT_S = 0.0025
 GRID = PupilGrid(24, 4.2 / 24)
@@ -120,8 +122,7 @@ def test_leaving_the_screen_is_an_error():
 def test_uplink_line_of_sight_follows_the_beam_from_an_offset_launch():
     """The uplink cone, anchored on an off-axis launch point, against the ray
     geometry of ``lgs.cone_coordinates``."""
-    from luckyao.lgs import cone_coordinates
-    from luckyao.sensing import uplink_line_of_sight
+    from luckyao.geometry import cone_coordinates, uplink_line_of_sight
 
     launch, direction, beacon_height = np.array([0.4, -0.3]), (5e-5, -1e-4), 22000.0
     x, y = GRID.xy_m

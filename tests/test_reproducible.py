@@ -1,24 +1,20 @@
 """Same config and seed give the same numbers; another seed gives others."""
 
+from pathlib import Path
+
 import numpy as np
+import yaml
 
-from luckyao.atmosphere import strip_screen
-from luckyao.detector import Detector
-from luckyao.imaging import Imager
-from luckyao.lucky import run_lucky
-from luckyao.propagation import ScreenSet
-from luckyao.simulate import System, simulate
-from luckyao.turbulence import strip_specs
+from luckyao.atmosphere.screens import ScreenSet, strip_screen
+from luckyao.lucky.detector import Detector
+from luckyao.lucky.selection import run_lucky
+from luckyao.optics.imaging import Imager
+from luckyao.study.case import Case
+from luckyao.study.simulation import simulate
+from luckyao.study.turbulence import strip_specs
 
-CASE = {
-    "duration_s": 0.2, "time_step_s": 0.0025,
-    "telescope": {"diameter_m": 4.2, "obscuration_m": 1.2},
-    "atmosphere": {"r0_500nm_m": 0.135, "r0_amplitude_m": 0.0, "r0_period_s": 1.0, "outer_scale_m": 20.0,
-                   "height_m": [0.0, 5000.0], "cn2_fraction": [0.7, 0.3],
-                   "wind_speed_m_s": [10.0, 20.0], "wind_direction_deg": [0.0, 90.0]},
-    "camera": {"wavelength_m": 8e-7, "n_pixels": 64, "field_of_view_arcsec": 1.25, "frame_time_s": 0.01},
-    "targets_arcsec": [[0.0, 0.0]], "ao": {"mode": "none"},
-}
+CASE = yaml.safe_load((Path(__file__).parent / "data" / "tiny.yaml").read_text())["base"]
+"""0.2 s, 4.2 m telescope, two layers at 0 and 5 km, no LGS, 64-pixel camera."""
 SPEC = {"duration_s": 0.2, "max_pixel_m": 0.1, "field_radius_arcsec": 1.0, "min_along_m": 20.0,
         "min_across_m": 10.0, "time_step_s": 0.0025, "diameter_m": 4.2, "outer_scale_m": 20.0,
         "height_m": [0.0, 5000.0], "wind_speed_m_s": [10.0, 20.0], "wind_direction_deg": [0.0, 90.0]}
@@ -28,7 +24,7 @@ def _run(seed):
     specs = strip_specs(SPEC)
     screens = ScreenSet.from_screens(
         specs, [strip_screen(s, 20.0, np.random.default_rng([seed, i])) for i, s in enumerate(specs)])
-    system = System.from_config(CASE)
+    system = Case.from_config(CASE)
     frames = []
     telemetry = simulate(system, screens, lambda start, block: frames.append(block.copy()))
     cube = np.concatenate(frames, axis=1)[0]

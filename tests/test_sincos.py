@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from luckyao.sincos import cos_sin
+from luckyao.optics.sincos import cos_sin
 
 
 def test_float32_sincos_is_accurate_to_one_ulp():

@@ -4,14 +4,16 @@ import numpy as np
 from scipy.ndimage import map_coordinates
 from scipy.special import gamma
 
-from luckyao.lgs import LgsConfig, cone_coordinates
-from luckyao.pupil import Telescope, TiltRemover
-from luckyao.tomography import (SlopeGeometry, TurbulencePrior, layer_reconstructor,
-                                lgs_rms_nm, lucky_frame_rms_nm, pupil_points,
-                                slope_covariance, factorize, target_reconstructor,
-                                von_karman_structure_function_rad2)
+from luckyao.atmosphere.statistics import von_karman_structure_function
+from luckyao.geometry import cone_coordinates
+from luckyao.optics.pupil import Telescope, TiltRemover
+from luckyao.tomography.criterion import lgs_rms_nm, lucky_frame_rms_nm
+from luckyao.tomography.prior import TurbulencePrior
+from luckyao.tomography.reconstructor import factorize, layer_reconstructor, pupil_points, target_reconstructor
+from luckyao.tomography.slopes import SlopeGeometry, slope_covariance
 from luckyao.units import ARCSEC_RAD
-from luckyao.wfs import ShackHartmann
+from luckyao.wfs.beacons import LgsConfig
+from luckyao.wfs.shack_hartmann import ShackHartmann
 
 TELESCOPE = Telescope(4.2, 1.2)
 WFS = ShackHartmann(TELESCOPE, 8, 532e-9)
@@ -27,7 +29,7 @@ def test_structure_function_kolmogorov_limit():
     kolmogorov = 2 * (24 / 5 * gamma(6 / 5)) ** (5 / 6)
     np.testing.assert_allclose(kolmogorov, 6.8839, rtol=1e-4)
     r = np.array([2e-4, 2e-3, 2e-2])
-    ratio = von_karman_structure_function_rad2(r, r0, outer) / (kolmogorov * (r / r0) ** (5 / 3))
+    ratio = von_karman_structure_function(r, r0, outer) / (kolmogorov * (r / r0) ** (5 / 3))
     np.testing.assert_allclose(ratio, 1 - 1.485 * (r / outer) ** (1 / 3), rtol=2e-4)
 
 

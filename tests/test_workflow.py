@@ -15,10 +15,23 @@ REPO = Path(__file__).resolve().parents[1]
 TINY = REPO / "tests" / "data" / "tiny.yaml"
 
 
-def snakemake(workdir: Path, config: Path, *args):
+def snakemake(workdir: Path, *args):
+    """Snakemake on the repository's workflow in ``workdir``, whose study config is
+    ``workdir/config/config.yaml`` (the workflow's ``configfile:``)."""
     command = [sys.executable, "-m", "snakemake", "-s", str(REPO / "Snakefile"), "-d", str(workdir),
-               "--cores", "2", "--config", f"study={config}", *args]
+               "--cores", "2", *args]
     return subprocess.run(command, capture_output=True, text=True, timeout=600)
+
+
+def write_config(workdir: Path, study: dict | None = None) -> Path:
+    """The workdir's study config: the tiny study, or ``study``."""
+    path = workdir / "config" / "config.yaml"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    if study is None:
+        shutil.copy(TINY, path)
+    else:
+        path.write_text(yaml.safe_dump(study))
+    return path
 
 
 def jobs_planned(result) -> list[tuple[str, str]]:
@@ -37,9 +50,8 @@ def jobs_planned(result) -> list[tuple[str, str]]:
 @pytest.fixture(scope="module")
 def finished_run(tmp_path_factory):
     workdir = tmp_path_factory.mktemp("study")
-    config = workdir / "tiny.yaml"
-    shutil.copy(TINY, config)
-    result = snakemake(workdir, config)
+    config = write_config(workdir)
+    result = snakemake(workdir)
     assert result.returncode == 0, result.stderr[-3000:]
     return workdir, config
 
@@ -68,7 +80,7 @@ def test_tiny_study_makes_every_figure_with_provenance(finished_run):
 
 def test_nothing_to_do_after_a_run(finished_run):
     workdir, config = finished_run
-    result = snakemake(workdir, config, "--dry-run")
+    result = snakemake(workdir, "--dry-run")
     assert result.returncode == 0, result.stderr
     assert jobs_planned(result) == []
 
@@ -79,7 +91,7 @@ def test_editing_one_case_reruns_only_that_case(finished_run):
     study["cases"]["bad"]["atmosphere"]["r0_500nm_m"] = 0.12
     edited = workdir / "edited.yaml"
     edited.write_text(yaml.safe_dump(study))
-    result = snakemake(workdir, edited, "--dry-run")
+    result = snakemake(workdir, "--dry-run", "--configfile", str(edited))
     assert result.returncode == 0, result.stderr
     jobs = jobs_planned(result)
     cases = {w for rule, w in jobs if rule in ("simulate", "lucky")}
@@ -91,9 +103,8 @@ def test_editing_one_case_reruns_only_that_case(finished_run):
 def test_invalid_config_fails_before_any_job_naming_the_key(tmp_path):
     study = yaml.safe_load(TINY.read_text())
     study["cases"]["good"]["atmosphere"]["r0_500nm_m"] = -0.2
-    bad = tmp_path / "bad.yaml"
-    bad.write_text(yaml.safe_dump(study))
-    result = snakemake(tmp_path, bad, "--dry-run")
+    write_config(tmp_path, study)
+    result = snakemake(tmp_path, "--dry-run")
     assert result.returncode != 0
     message = result.stdout + result.stderr
     assert "cases.good.atmosphere.r0_500nm_m" in message

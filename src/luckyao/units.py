@@ -9,14 +9,6 @@ REFERENCE_WAVELENGTH_M = 500e-9
 """Wavelength at which r0 and stored phases are referenced [m]."""
 
 
-def arcsec_to_rad(value_arcsec):
-    return np.asarray(value_arcsec, dtype=float) * ARCSEC_RAD
-
-
-def rad_to_arcsec(value_rad):
-    return np.asarray(value_rad, dtype=float) / ARCSEC_RAD
-
-
 def phase_rad_to_nm(phase_rad, wavelength_m):
     """Optical path difference [nm] of a phase [rad] at ``wavelength_m``."""
     return np.asarray(phase_rad) * wavelength_m / (2 * np.pi) * 1e9

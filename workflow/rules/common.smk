@@ -1,33 +1,37 @@
-# Study config, validated once; lookups the rules share. No physics here.
-import os
+# Study config, validated once at the edge; lookups the rules share. No physics here.
 import re
 import sys
 
-from luckyao.config import (ConfigError, canonical_json, load_study, lucky_settings,
-                            reconstructor_key, reconstructor_spec, turbulence_key, turbulence_spec)
+from luckyao.study.code_deps import step_sources
+from luckyao.study.config import (ConfigError, canonical_json, commands_key, commands_spec, lucky_settings,
+                                  reconstructor_key, reconstructor_spec, turbulence_key, turbulence_spec,
+                                  validate_study)
 
-STUDY_FILE = config.get("study", "config/config.yaml")
 try:
-    STUDY, CASES = load_study(STUDY_FILE)
+    CASES = validate_study(config)
 except ConfigError as err:
-    sys.exit(f"luckyao: invalid study config {STUDY_FILE}: {err}")
+    sys.exit(f"luckyao: invalid study config: {err}")
+STUDY = config
 
 TURBULENCE = {name: turbulence_spec(STUDY, case) for name, case in CASES.items()}
 TURBULENCE_BY_KEY = {turbulence_key(spec): spec for spec in TURBULENCE.values()}
 RECONSTRUCTOR = {name: reconstructor_spec(case) for name, case in CASES.items()}
 RECONSTRUCTOR_BY_KEY = {reconstructor_key(s): s for s in RECONSTRUCTOR.values() if s is not None}
-LUCKYAO = f"OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1 NUMBA_NUM_THREADS=1 {sys.executable} -m luckyao.cli"
-
-
-def src(*modules):
-    """Source files a rule's output depends on: an edit reruns exactly those jobs."""
-    return [os.path.join(workflow.basedir, "src", "luckyao", f"{m}.py") for m in modules]
+COMMANDS = {name: commands_spec(case) for name, case in CASES.items()}
+COMMANDS_BY_KEY = {commands_key(s): s for s in COMMANDS.values() if s is not None}
+LUCKYAO = f"OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1 NUMBA_NUM_THREADS=1 {sys.executable} -m luckyao"
 
 
 def reconstructor_file(case):
     """The case's cached reconstructor file, or [] without LGS."""
     spec = RECONSTRUCTOR[case]
     return f"results/reconstructors/{reconstructor_key(spec)}.nc" if spec else []
+
+
+def commands_file(case):
+    """The case's cached AO command-matrix file, or [] without AO."""
+    spec = COMMANDS[case]
+    return f"results/commands/{commands_key(spec)}.nc" if spec else []
 
 
 def frames_output(path):
@@ -38,4 +42,5 @@ wildcard_constraints:
     case="|".join(re.escape(c) for c in CASES),
     key="screens_[0-9a-f]{12}",
     rkey="reconstructor_[0-9a-f]{12}",
+    ckey="commands_[0-9a-f]{12}",
     fig="|".join(re.escape(f) for f in STUDY["figures"]),

@@ -2,7 +2,7 @@ rule figure:
     """One figure and the tidy dataset it is drawn from."""
     input:
         lucky=lambda w: figure_inputs(w.fig),
-        code=src("figures", "analytic"),
+        code=step_sources("figures"),
     output:
         pdf="figures/{fig}.pdf",
         png="figures/{fig}.png",

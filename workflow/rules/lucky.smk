@@ -3,11 +3,11 @@ rule lucky:
     input:
         frames="results/cases/{case}/frames.nc",
         telemetry="results/cases/{case}/telemetry.nc",
-        code=src("lucky", "metrics", "detector", "postprocess", "datasets"),
+        code=step_sources("postprocess"),
     output:
         "results/cases/{case}/lucky.nc",
     params:
-        settings=lambda w: canonical_json(lucky_settings(STUDY, w.case)),
+        settings=lambda w: canonical_json(lucky_settings(STUDY, CASES, w.case)),
     log:
         "logs/lucky/{case}.log",
     benchmark:

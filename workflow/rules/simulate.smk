@@ -4,7 +4,8 @@ rule simulate:
         screens=lambda w: f"results/turbulence/{turbulence_key(TURBULENCE[w.case])}.npy",
         screens_metadata=lambda w: f"results/turbulence/{turbulence_key(TURBULENCE[w.case])}.nc",
         reconstructor=lambda w: reconstructor_file(w.case),
-        code=src("propagation", "pupil", "imaging", "simulate", "sensing", "lgs", "wfs", "tomography", "datasets"),
+        commands=lambda w: commands_file(w.case),
+        code=step_sources("simulation"),
     output:
         frames=frames_output("results/cases/{case}/frames.nc"),
         telemetry="results/cases/{case}/telemetry.nc",
@@ -18,5 +19,5 @@ rule simulate:
     shell:
         "{LUCKYAO} simulate --case {params.case:q} --name {wildcards.case:q} --seed {params.seed}"
         " --screens {input.screens} --screens-metadata {input.screens_metadata}"
-        " --reconstructor '{input.reconstructor}'"
+        " --reconstructor '{input.reconstructor}' --commands '{input.commands}'"
         " --frames {output.frames} --telemetry {output.telemetry} 2> {log}"

@@ -1,7 +1,7 @@
 rule turbulence:
     """Normalised phase screens shared by every case with the same turbulence spec."""
     input:
-        code=src("atmosphere", "turbulence", "datasets"),
+        code=step_sources("turbulence"),
     output:
         screens="results/turbulence/{key}.npy",
         metadata="results/turbulence/{key}.nc",

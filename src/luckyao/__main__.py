@@ -1,0 +1,7 @@
+"""``python -m luckyao``: the command line of the workflow steps."""
+
+import sys
+
+from .study.cli import main
+
+sys.exit(main())

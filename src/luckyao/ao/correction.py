@@ -1,0 +1,80 @@
+"""The open-loop correction of the time loop: LGS slopes -> DM commands -> DM surface, with a delay.
+
+The WFS are open loop: they never see the DM, so every exposure can be sensed
+before the science steps it corrects. The commands ``c_e = M s_e`` of the
+exposure over steps ``[s, s + E)`` (``M`` from :func:`.control.command_matrix`)
+are applied to the science path from step ``s + delay_steps`` for ``E`` steps,
+until the next exposure's command takes over (``delay_steps = E``: a 5 ms
+exposure's command holds during the next exposure). Before the first command
+the DM is flat. The DM is conjugate to the pupil, so every line of sight sees
+the same surface ``H c`` (the influence functions at the science pupil samples,
+:class:`.dm.GridSurface`), subtracted from the turbulence.
+
+Pseudo-closed loop: the residual slopes of exposure ``e`` are ``s_e - D c_e'``,
+``D`` the DM's slopes as every WFS sees them (:func:`.control.dm_slopes_matrix`)
+and ``c_e'`` the mean command applied during that exposure; reconstructed along a
+target they estimate the corrected residual without photons from it.
+"""
+
+import numpy as np
+
+from ..units import REFERENCE_WAVELENGTH_M
+from .dm import GridSurface
+
+
+class OpenLoopCorrection:
+    """Commands of every exposure and the DM surface at every step.
+
+    ``command_matrix`` (n_act, n_slopes) [m / rad]; ``dm_slopes`` (n_slopes, n_act)
+    [rad / m]; ``influence`` (n_samples, n_act) [m / m]: the DM surface at the
+    science pupil samples (in the order the propagator packs them).
+    ``lookahead_steps``: how far the sensing may run ahead of the science steps
+    (a lucky frame's steps, when its exposures are all sensed first).
+    """
+
+    def __init__(self, command_matrix: np.ndarray, dm_slopes: np.ndarray, surface: GridSurface,
+                 exposure_steps: int, delay_steps: int, lookahead_steps: int):
+        if delay_steps < exposure_steps:
+            raise ValueError(f"a command cannot be applied before its exposure ends: delay_steps "
+                             f"{delay_steps} < exposure_steps {exposure_steps}")
+        if command_matrix.shape[0] != int(surface.valid.sum()) or dm_slopes.shape != command_matrix.shape[::-1]:
+            raise ValueError("the command matrix does not match this DM or WFS: rebuild it")
+        self.command_matrix = np.asarray(command_matrix, dtype=np.float32)
+        self.dm_slopes = np.asarray(dm_slopes, dtype=np.float32)
+        self.surface = surface
+        self.exposure_steps, self.delay_steps, self.lookahead_steps = exposure_steps, delay_steps, lookahead_steps
+        self._commands = {}  # exposure start step -> commands (n_act,) float32 [m]
+        self._surfaces = {}  # exposure start step -> DM surface (n_samples,) float32 [rad at 500 nm]
+        self._flat_commands = np.zeros(command_matrix.shape[0], dtype=np.float32)
+        self._flat_surface = np.zeros(surface.samples.size, dtype=np.float32)
+
+    def measure(self, start_step: int, slopes: np.ndarray) -> None:
+        """The commands of the exposure starting at ``start_step`` from its tilt-removed
+        slopes (n_beacons, 2, n_valid) [rad]; commands no longer needed are dropped."""
+        commands = self.command_matrix @ np.asarray(slopes, dtype=np.float32).ravel()
+        self._commands[start_step] = commands
+        # in rad at the reference wavelength, that of the stored phases
+        self._surfaces[start_step] = (self.surface(commands) * (2 * np.pi / REFERENCE_WAVELENGTH_M)).astype(np.float32)
+        oldest = start_step - self.delay_steps - self.exposure_steps - self.lookahead_steps
+        for key in [k for k in self._commands if k < oldest]:
+            del self._commands[key], self._surfaces[key]
+
+    def _source(self, step: int) -> int:
+        """Start step of the exposure whose command is applied at ``step`` (< 0: none yet)."""
+        return (step - self.delay_steps) // self.exposure_steps * self.exposure_steps
+
+    def commands_at(self, step: int) -> np.ndarray:
+        """Commands (n_act,) [m] applied at ``step``."""
+        source = self._source(step)
+        return self._commands[source] if source >= 0 else self._flat_commands
+
+    def surface_at(self, step: int) -> np.ndarray:
+        """DM surface (n_samples,) [rad at 500 nm] at the science pupil samples at ``step``."""
+        source = self._source(step)
+        return self._surfaces[source] if source >= 0 else self._flat_surface
+
+    def residual_slopes(self, start_step: int, slopes: np.ndarray) -> np.ndarray:
+        """Pseudo-closed-loop slopes of the exposure starting at ``start_step``: its
+        open-loop slopes less the DM's, for the mean command applied during it."""
+        applied = np.mean([self.commands_at(start_step + i) for i in range(self.exposure_steps)], axis=0)
+        return slopes - (self.dm_slopes @ applied).reshape(slopes.shape)

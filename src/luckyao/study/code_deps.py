@@ -1,0 +1,73 @@
+"""The source files a workflow step's results depend on: its module's import closure.
+
+Snakemake reruns a job when an input file changes, but knows nothing of the
+modules a command imports. Each rule therefore lists as inputs the files of
+the import closure of the module its step runs (every ``luckyao`` module it
+imports, at any depth and inside functions too, with the ``__init__.py`` of
+every package on the way), computed from the source when the workflow is
+parsed, so the list cannot drift from the code. The generated WFS kernels are
+made from ``wfs/kernels.py`` and ``wfs/codelets.py``, which are in the closure
+of every step that runs them.
+"""
+
+import ast
+from pathlib import Path
+
+PACKAGE_ROOT = Path(__file__).resolve().parents[1]
+"""The ``luckyao`` package folder."""
+
+
+def module_file(module: str, root: Path = PACKAGE_ROOT) -> Path:
+    """The file of ``luckyao.a.b`` (a module or a package's ``__init__.py``)."""
+    parts = module.split(".")[1:]
+    path = root.joinpath(*parts)
+    return path / "__init__.py" if path.is_dir() else path.with_suffix(".py")
+
+
+def _imported_modules(path: Path, module: str) -> set[str]:
+    """``luckyao`` modules imported anywhere in the file of ``module``."""
+    tree = ast.parse(path.read_text(), filename=str(path))
+    package = module if path.name == "__init__.py" else module.rpartition(".")[0]
+    found = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            found |= {alias.name for alias in node.names if alias.name.split(".")[0] == "luckyao"}
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = package.split(".")[:len(package.split(".")) - node.level + 1]
+                target = ".".join(base + ([node.module] if node.module else []))
+            elif (node.module or "").split(".")[0] == "luckyao":
+                target = node.module
+            else:
+                continue
+            found.add(target)
+            # ``from package import module`` imports the module too
+            found |= {f"{target}.{alias.name}" for alias in node.names}
+    return found
+
+
+def import_closure(module: str, root: Path = PACKAGE_ROOT) -> list[Path]:
+    """Sorted files of ``module`` and everything it imports from ``luckyao``,
+    including the ``__init__.py`` of each package they live in."""
+    seen, files, todo = set(), set(), [module]
+    while todo:
+        name = todo.pop()
+        if name in seen:
+            continue
+        seen.add(name)
+        path = module_file(name, root)
+        if not path.exists():  # an object imported from a package, not a module
+            continue
+        files.add(path)
+        parts = name.split(".")
+        todo += [".".join(parts[:i]) for i in range(1, len(parts))]  # parent packages run first
+        todo += sorted(_imported_modules(path, name))
+    return sorted(files)
+
+
+def step_sources(step: str, root: Path = PACKAGE_ROOT) -> list[str]:
+    """Files a workflow step's results depend on: the import closure of
+    ``luckyao.study.<step>`` plus the command line that dispatches to it
+    (``python -m luckyao``; its per-step imports are lazy, so only its own files)."""
+    entry = [module_file(m, root) for m in ("luckyao.__main__", "luckyao.study.cli")]
+    return sorted(str(p) for p in set(import_closure(f"luckyao.study.{step}", root)) | set(entry))

@@ -1,0 +1,221 @@
+"""Study configuration: validation, case resolution, hashing and the turbulence key.
+
+A study config (YAML) has a ``base`` system and named ``cases`` that override
+it. Everything is checked against ``config.schema.yaml`` (beside this module) and a
+few cross-key rules before any job runs; the first problem is reported as a
+``ConfigError`` naming the key (``cases.noao_r0_20cm.atmosphere.r0_500nm_m``).
+"""
+
+import copy
+import hashlib
+import json
+from pathlib import Path
+
+import jsonschema
+import yaml
+
+SCHEMA_PATH = Path(__file__).with_name("config.schema.yaml")
+
+
+class ConfigError(ValueError):
+    """A study configuration that breaks the schema or a cross-key rule."""
+
+
+def load_schema(path: Path = SCHEMA_PATH) -> dict:
+    with open(path) as f:
+        return yaml.safe_load(f)
+
+
+def deep_merge(base: dict, override: dict) -> dict:
+    """A new dict: ``base`` with ``override`` applied recursively (lists are replaced)."""
+    merged = copy.deepcopy(base)
+    for key, value in override.items():
+        if isinstance(value, dict) and isinstance(merged.get(key), dict):
+            merged[key] = deep_merge(merged[key], value)
+        else:
+            merged[key] = copy.deepcopy(value)
+    return merged
+
+
+def _key_path(prefix: str, error: jsonschema.ValidationError) -> str:
+    parts = [prefix] if prefix else []
+    parts += [str(p) for p in error.absolute_path]
+    if error.validator == "required":
+        missing = error.message.split("'")[1]
+        parts.append(missing)
+    elif error.validator == "additionalProperties":
+        extra = error.message.split("'")[1]
+        parts.append(extra)
+    return ".".join(parts) or "(top level)"
+
+
+def _validate(instance, schema: dict, prefix: str) -> None:
+    validator = jsonschema.Draft7Validator(schema)
+    errors = sorted(validator.iter_errors(instance), key=lambda e: list(e.absolute_path))
+    if errors:
+        error = errors[0]
+        raise ConfigError(f"config key '{_key_path(prefix, error)}': {error.message}")
+
+
+def _check_case(name: str, case: dict, turbulence: dict) -> None:
+    where = f"cases.{name}"
+    atm = case["atmosphere"]
+    n = len(atm["height_m"])
+    for key in ("cn2_fraction", "wind_speed_m_s", "wind_direction_deg"):
+        if len(atm[key]) != n:
+            raise ConfigError(f"config key '{where}.atmosphere.{key}': has {len(atm[key])} values, "
+                              f"height_m has {n}")
+    if abs(sum(atm["cn2_fraction"]) - 1) > 1e-3:
+        raise ConfigError(f"config key '{where}.atmosphere.cn2_fraction': sums to "
+                          f"{sum(atm['cn2_fraction']):.4f}, must sum to 1")
+    if atm["r0_amplitude_m"] >= atm["r0_500nm_m"]:
+        raise ConfigError(f"config key '{where}.atmosphere.r0_amplitude_m': must be below r0_500nm_m")
+    steps = case["camera"]["frame_time_s"] / case["time_step_s"]
+    if abs(steps - round(steps)) > 1e-6 or round(steps) < 1:
+        raise ConfigError(f"config key '{where}.camera.frame_time_s': must be a whole number of time_step_s")
+    if case["duration_s"] < case["camera"]["frame_time_s"]:
+        raise ConfigError(f"config key '{where}.duration_s': shorter than one camera frame")
+    if case["duration_s"] > turbulence["duration_s"] + 1e-9:
+        raise ConfigError(f"config key '{where}.duration_s': {case['duration_s']} s exceeds "
+                          f"turbulence.duration_s = {turbulence['duration_s']} s")
+    tomo = case["tomography"]
+    if len(tomo["layer_cn2_fraction"]) != len(tomo["layer_heights_m"]):
+        raise ConfigError(f"config key '{where}.tomography.layer_cn2_fraction': has "
+                          f"{len(tomo['layer_cn2_fraction'])} values, layer_heights_m has {len(tomo['layer_heights_m'])}")
+    if case["lgs"]["enabled"] and steps % case["wfs"]["exposure_steps"]:
+        raise ConfigError(f"config key '{where}.wfs.exposure_steps': must divide the {round(steps)} steps "
+                          "of a camera frame")
+    if case["ao"]["mode"] != "none":
+        if not case["lgs"]["enabled"]:
+            raise ConfigError(f"config key '{where}.ao.mode': {case['ao']['mode']} needs lgs.enabled: true")
+        if case["ao"]["delay_steps"] < case["wfs"]["exposure_steps"]:
+            raise ConfigError(f"config key '{where}.ao.delay_steps': a command cannot be applied before its "
+                              f"exposure ends (at least wfs.exposure_steps = {case['wfs']['exposure_steps']})")
+    if case["telescope"]["obscuration_m"] >= case["telescope"]["diameter_m"]:
+        raise ConfigError(f"config key '{where}.telescope.obscuration_m': must be below diameter_m")
+    radius = turbulence["field_radius_arcsec"]
+    for x, y in case["targets_arcsec"]:
+        if (x * x + y * y) ** 0.5 > radius:
+            raise ConfigError(f"config key '{where}.targets_arcsec': target ({x}, {y}) lies beyond "
+                              f"turbulence.field_radius_arcsec = {radius}")
+
+
+def validate_study(config: dict, schema: dict | None = None) -> dict:
+    """Check a study config; returns ``{case name: resolved case config}``.
+
+    Raises ``ConfigError`` naming the first offending key.
+    """
+    schema = schema or load_schema()
+    _validate(config, schema, "")
+    case_schema = dict(schema["definitions"]["case"], definitions=schema["definitions"])
+    cases = {}
+    for name, override in config["cases"].items():
+        resolved = deep_merge(config["base"], override)
+        _validate(resolved, case_schema, f"cases.{name}")
+        _check_case(name, resolved, config["turbulence"])
+        cases[name] = resolved
+    for fig_id, figure in config["figures"].items():
+        for case in figure["cases"]:
+            if case not in cases:
+                raise ConfigError(f"config key 'figures.{fig_id}.cases': unknown case '{case}'")
+        if figure["kind"] == "quality_vs_fraction" and "criteria" not in figure:
+            raise ConfigError(f"config key 'figures.{fig_id}.criteria': required for {figure['kind']}")
+        for case in figure["cases"]:
+            produced = criteria_of(cases[case])
+            needed = set(figure.get("criteria", []))
+            needed |= {"lgs_rms"} if figure["kind"] == "rms_truth" else set()
+            needed |= {"lgs_residual_rms"} if figure["kind"] == "residuals" else set()
+            if needed - produced:
+                raise ConfigError(f"config key 'figures.{fig_id}.cases': case '{case}' cannot give "
+                                  f"{', '.join(sorted(needed - produced))} (needs "
+                                  f"{'LGS' if 'lgs_rms' in needed - produced else 'AO'})")
+        detector = figure.get("detector")
+        if detector is not None and detector not in config["lucky"]["detectors"]:
+            raise ConfigError(f"config key 'figures.{fig_id}.detector': unknown detector '{detector}'")
+    return cases
+
+
+def criteria_of(case: dict) -> set[str]:
+    """Selection criteria a resolved case gives: image criteria always, ``lgs_rms`` with
+    LGS, ``lgs_residual_rms`` and the oracle ``true_rms`` with AO."""
+    criteria = {"strehl", "d50"}
+    if case["lgs"]["enabled"]:
+        criteria.add("lgs_rms")
+    if case["ao"]["mode"] != "none":
+        criteria |= {"lgs_residual_rms", "true_rms"}
+    return criteria
+
+
+def load_study(*paths) -> tuple[dict, dict]:
+    """Read study YAML files, each deep-merged over the one before (as Snakemake's
+    ``configfile:`` and ``--configfile`` do), and validate the result; returns
+    (config, resolved cases)."""
+    config = {}
+    for path in paths:
+        try:
+            with open(path) as f:
+                layer = yaml.safe_load(f) or {}
+        except FileNotFoundError as err:
+            raise ConfigError(f"config file '{path}' not found") from err
+        except yaml.YAMLError as err:
+            raise ConfigError(f"config file '{path}' is not valid YAML: {err}") from err
+        config = deep_merge(config, layer)
+    return config, validate_study(config)
+
+
+def canonical_json(value) -> str:
+    """Key-sorted compact JSON: the text that is hashed and stored."""
+    return json.dumps(value, sort_keys=True, separators=(",", ":"))
+
+
+def sha256(value) -> str:
+    return hashlib.sha256(canonical_json(value).encode()).hexdigest()
+
+
+def turbulence_spec(study: dict, case: dict) -> dict:
+    """Everything the shared screens depend on (not r0 or Cn2: those only scale them)."""
+    atm = case["atmosphere"]
+    return {
+        "seed": study["seed"],
+        **study["turbulence"],
+        "time_step_s": case["time_step_s"],
+        "diameter_m": case["telescope"]["diameter_m"],
+        "outer_scale_m": atm["outer_scale_m"],
+        "height_m": atm["height_m"],
+        "wind_speed_m_s": atm["wind_speed_m_s"],
+        "wind_direction_deg": atm["wind_direction_deg"],
+    }
+
+
+def turbulence_key(spec: dict) -> str:
+    return "screens_" + sha256(spec)[:12]
+
+
+def reconstructor_spec(case: dict) -> dict | None:
+    """Everything a case's tomographic reconstructor depends on (None without LGS)."""
+    if not case["lgs"]["enabled"]:
+        return None
+    return {key: case[key] for key in ("telescope", "lgs", "wfs", "tomography", "targets_arcsec")}
+
+
+def reconstructor_key(spec: dict) -> str:
+    return "reconstructor_" + sha256(spec)[:12]
+
+
+def commands_spec(case: dict) -> dict | None:
+    """Everything a case's AO command matrix depends on (None without AO): not the
+    delay, the targets or the atmosphere, so cases that differ only there share it."""
+    if case["ao"]["mode"] == "none":
+        return None
+    unused = {"delay_steps", "glao_max_height_m" if case["ao"]["mode"] == "ltao" else "correction_direction_arcsec"}
+    ao = {key: value for key, value in case["ao"].items() if key not in unused}
+    return {"ao": ao, **{key: case[key] for key in ("telescope", "lgs", "wfs", "tomography")}}
+
+
+def commands_key(spec: dict) -> str:
+    return "commands_" + sha256(spec)[:12]
+
+
+def lucky_settings(study: dict, cases: dict, case_name: str) -> dict:
+    """The post-processing settings one case's lucky job uses, with its resolved config."""
+    return {"seed": study["seed"], "case": case_name, "case_config": cases[case_name], **study["lucky"]}

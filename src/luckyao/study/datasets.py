@@ -1,0 +1,137 @@
+"""netCDF files of the study: provenance, atomic writes, checked reads.
+
+Every file is written under a temporary name and renamed when complete, so a
+file with the final name is never half-written. Conventions: CF-1.8 style,
+``units`` and ``long_name`` on every variable; provenance in global attributes.
+"""
+
+import datetime
+import json
+import os
+import platform
+from contextlib import contextmanager
+from pathlib import Path
+
+import netCDF4
+import numpy as np
+import scipy
+import xarray as xr
+
+from .. import __version__
+from .config import canonical_json, sha256
+
+
+def provenance(title: str, config: dict, seed: int) -> dict:
+    """Global attributes: the config as JSON, its sha256, code version, seed, libraries."""
+    return {
+        "Conventions": "CF-1.8",
+        "title": title,
+        "source": f"luckyao {__version__}",
+        "history": f"{datetime.datetime.now(datetime.timezone.utc).isoformat(timespec='seconds')} created by luckyao",
+        "config_json": canonical_json(config),
+        "config_sha256": sha256(config),
+        "code_version": __version__,
+        "seed": int(seed),
+        "library_versions": json.dumps({
+            "python": platform.python_version(), "numpy": np.__version__, "scipy": scipy.__version__,
+            "xarray": xr.__version__, "netCDF4": netCDF4.__version__}),
+    }
+
+
+@contextmanager
+def atomic_path(path):
+    """Yields a temporary path next to ``path``; renamed to ``path`` on success only."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    partial = path.with_name(path.name + ".partial")
+    try:
+        yield partial
+        os.replace(partial, path)
+    finally:
+        if partial.exists():
+            partial.unlink()
+
+
+def write_dataset(ds: xr.Dataset, path, compress: bool = True) -> None:
+    """Write ``ds`` to netCDF4 atomically; floats compressed with zlib + shuffle."""
+    encoding = {}
+    if compress:
+        for name, var in ds.data_vars.items():
+            if var.dtype.kind == "f" and var.size > 1:
+                encoding[name] = {"zlib": True, "complevel": 4, "shuffle": True}
+    with atomic_path(path) as tmp:
+        ds.to_netcdf(tmp, engine="netcdf4", encoding=encoding)
+
+
+def open_dataset(path, what: str) -> xr.Dataset:
+    """Open a study file fully into memory with a clear error if missing or corrupt."""
+    path = Path(path)
+    if not path.exists():
+        raise FileNotFoundError(f"{what} file '{path}' is missing; rerun the step that makes it")
+    try:
+        with xr.open_dataset(path, engine="netcdf4") as ds:
+            return ds.load()
+    except (OSError, ValueError, RuntimeError) as err:
+        raise OSError(f"{what} file '{path}' is unreadable or corrupt ({err}); delete it and rerun") from err
+
+
+class FrameWriter:
+    """Writes a (target, frame, y, x) float32 cube frame block by frame block.
+
+    One frame per chunk, uncompressed: zlib (level 1, shuffle) saved only 18 % on
+    these noise-like float32 frames and cost 5-6 ms per 256 x 256 frame, more
+    than simulating it. Opened as a context manager; the file gets its final
+    name only when the block closes without error.
+    """
+
+    def __init__(self, path, n_targets: int, n_frames: int, n_pixels: int,
+                 pixel_scale_arcsec: float, attrs: dict):
+        self._atomic = atomic_path(path)
+        self._shape = (n_targets, n_frames, n_pixels)
+        self._pixel_scale = pixel_scale_arcsec
+        self._attrs = attrs
+
+    def __enter__(self):
+        tmp = self._atomic.__enter__()
+        n_targets, n_frames, n = self._shape
+        self._nc = netCDF4.Dataset(tmp, "w", format="NETCDF4")
+        self._nc.setncatts(self._attrs)
+        for dim, size in (("target", n_targets), ("frame", n_frames), ("y", n), ("x", n)):
+            self._nc.createDimension(dim, size)
+        for axis in ("y", "x"):
+            coord = self._nc.createVariable(axis, "f8", (axis,))
+            coord[:] = (np.arange(n) - n // 2) * self._pixel_scale
+            coord.units = "arcsec"
+            coord.long_name = f"{axis} position on the sky relative to the optical axis"
+        self.frames = self._nc.createVariable(
+            "frames", "f4", ("target", "frame", "y", "x"), chunksizes=(1, 1, n, n))
+        self.frames.units = "1"
+        self.frames.long_name = "noiseless lucky-camera frame, unit total flux"
+        return self
+
+    def write(self, start: int, block: np.ndarray) -> None:
+        """Frames ``start:start+k`` for every target from ``block`` (target, k, y, x)."""
+        self.frames[:, start:start + block.shape[1]] = block
+
+    def __exit__(self, exc_type, exc, tb):
+        self._nc.close()
+        return self._atomic.__exit__(exc_type, exc, tb)
+
+
+def iter_frame_blocks(path, target: int, block: int = 64):
+    """Callable returning an iterator of (start, frames (k, y, x) float32) for one target."""
+    path = Path(path)
+    if not path.exists():
+        raise FileNotFoundError(f"frames file '{path}' is missing; rerun the simulate step")
+
+    def iterate():
+        try:
+            nc = netCDF4.Dataset(path, "r")
+        except OSError as err:
+            raise OSError(f"frames file '{path}' is unreadable or corrupt ({err})") from err
+        with nc:
+            frames = nc.variables["frames"]
+            for start in range(0, frames.shape[1], block):
+                yield start, np.asarray(frames[target, start:start + block], dtype=np.float32)
+
+    return iterate

@@ -1,0 +1,383 @@
+"""Figures of the study: each is a tidy dataset first, then a drawing of it.
+
+``draw_figure`` builds the figure's dataset from the cases' ``lucky.nc`` files,
+writes it as ``<prefix>.nc`` and draws ``<prefix>.pdf`` and ``<prefix>.png``
+from that dataset alone.
+"""
+
+import json
+import logging
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+import xarray as xr  # noqa: E402
+
+from ..geometry import LineOfSight, footprint_centre_m, footprint_coverage, footprint_scale  # noqa: E402
+from ..optics.long_exposure import long_exposure_strehl  # noqa: E402
+from ..units import ARCSEC_RAD  # noqa: E402
+from .case import Case, lgs_from, targets_from  # noqa: E402
+from .config import sha256  # noqa: E402
+from .datasets import open_dataset, provenance, write_dataset  # noqa: E402
+
+log = logging.getLogger(__name__)
+
+_METRICS = {
+    "strehl": "Strehl ratio",
+    "fwhm_arcsec": "FWHM [arcsec]",
+    "d50_arcsec": "50% energy diameter [arcsec]",
+}
+_CRITERIA = {"strehl": "image Strehl", "d50": "50%-energy diameter", "lgs_rms": "LGS open-loop rms",
+             "lgs_residual_rms": "LGS pseudo-closed-loop rms", "true_rms": "true corrected rms (oracle)"}
+_AO_STYLE = {"ltao": "-", "glao": "-.", "none": "--"}
+"""Line style of a case by its AO mode; colours pair the k-th case of each mode."""
+
+
+def _case_label(name: str, case: dict, r0_cm: float) -> str:
+    r0 = f"variable r0, mean {r0_cm:.1f} cm" if case["atmosphere"]["r0_amplitude_m"] > 0 else f"r0 {r0_cm:.1f} cm"
+    if case["lgs"]["enabled"]:
+        n = case["wfs"]["n_subapertures"]
+        r0 += f", {n}x{n} LGS WFS at {case['lgs']['height_m'] / 1e3:.0f} km"
+    ao = case["ao"]
+    if ao["mode"] != "none":
+        r0 += f", {ao['mode'].upper()} {ao['n_actuators']}x{ao['n_actuators']} DM"
+    return f"{name} ({r0})"
+
+
+def _case_coords(settings: dict, names, datasets) -> dict:
+    r0_cm = [100 * float(ds["mean_r0_500nm_m"]) for ds in datasets]
+    configs = [settings["case_configs"][n] for n in names]
+    modes = [c["ao"]["mode"] for c in configs]
+    colour = [modes[:i].count(mode) for i, mode in enumerate(modes)]
+    return {
+        "case": ("case", list(names), {"long_name": "case"}),
+        "r0_cm": ("case", r0_cm, {"units": "cm", "long_name": "mean Fried parameter at 500 nm"}),
+        "label": ("case", [_case_label(n, c, r) for n, c, r in zip(names, configs, r0_cm)],
+                  {"long_name": "legend label"}),
+        "ao_mode": ("case", modes, {"long_name": "AO correction: none, ltao or glao"}),
+        "colour": ("case", colour, {"units": "1", "long_name": "colour index (k-th case of its AO mode)"}),
+    }
+
+
+def _style(ds: xr.Dataset, case) -> dict:
+    row = ds.sel(case=case)
+    return {"color": f"C{int(row.colour)}", "ls": _AO_STYLE[str(row.ao_mode.values)]}
+
+
+def quality_vs_fraction_data(settings: dict, names, datasets) -> xr.Dataset:
+    """Integrated-image quality (on-axis target) vs fraction selected, per case and criterion."""
+    detector, criteria = settings.get("detector", "noiseless"), settings["criteria"]
+    data_vars = {}
+    for metric in _METRICS:
+        rows = [ds[metric].sel(criterion=criteria, detector=detector).isel(target=0).values for ds in datasets]
+        data_vars[metric] = (("case", "criterion", "fraction"), np.array(rows), dict(datasets[0][metric].attrs))
+    long_exposure = [ds["long_exposure_strehl"].sel(detector=detector).isel(target=0).values for ds in datasets]
+    data_vars["long_exposure_strehl"] = (("case", "recentring"), np.array(long_exposure),
+                                         dict(datasets[0]["long_exposure_strehl"].attrs))
+    ds = xr.Dataset(data_vars, coords={**_case_coords(settings, names, datasets),
+                                       "criterion": ("criterion", criteria, {"long_name": "selection criterion"}),
+                                       "fraction": datasets[0]["fraction"],
+                                       "recentring": datasets[0]["recentring"]})
+    ds.attrs.update(detector=detector)
+    return ds
+
+
+def draw_quality_vs_fraction(ds: xr.Dataset, title: str):
+    n_rows = ds.sizes["criterion"]
+    fig, axes = plt.subplots(n_rows, 3, figsize=(13, 3.6 * n_rows + 0.6), squeeze=False, constrained_layout=True)
+    for r, criterion in enumerate(ds.criterion.values):
+        for ax, metric in zip(axes[r], _METRICS):
+            for case in ds.case.values:
+                row = ds.sel(case=case, criterion=criterion)
+                ax.plot(100 * ds.fraction, row[metric], marker="o", ms=3, label=str(row.label.values),
+                        **_style(ds, case))
+                if metric == "strehl":
+                    ax.axhline(float(row.long_exposure_strehl.sel(recentring="none")), lw=0.8,
+                               color=_style(ds, case)["color"], ls=":")
+            ax.set_xscale("log")
+            ax.set_xlabel("frames selected [%]")
+            ax.set_ylabel(_METRICS[metric])
+            ax.grid(alpha=0.3)
+        letter = f"({chr(ord('a') + r)}) " if n_rows > 1 else ""
+        axes[r, 0].set_title(f"{letter}selection by {_CRITERIA.get(criterion, criterion)}", loc="left", fontsize=10)
+    fig.legend(*axes[0, 0].get_legend_handles_labels(), loc="outside lower center", ncol=2, fontsize=7,
+               title="solid: LTAO, dash-dot: GLAO, dashed: no AO; dotted: long exposure without recentring",
+               title_fontsize=7)
+    fig.suptitle(f"{title}: integrated-image quality vs fraction selected, detector {ds.attrs['detector']}")
+    return fig
+
+
+def long_exposure_check_data(settings: dict, names, datasets) -> xr.Dataset:
+    """Simulated long-exposure Strehl (no recentring) beside the analytic value."""
+    detector = settings.get("detector", "noiseless")
+    simulated, error, analytic = [], [], []
+    for name, ds in zip(names, datasets):
+        case = Case.from_config(settings["case_configs"][name])
+        simulated.append(float(ds["long_exposure_strehl"].sel(recentring="none", detector=detector)
+                               .isel(target=0)))
+        error.append(float(ds["long_exposure_strehl_error"].isel(target=0)))
+        analytic.append(long_exposure_strehl(case.telescope, case.camera.wavelength_m, case.r0_samples_m(),
+                                             case.outer_scale_m))
+    attrs = {"units": "1"}
+    return xr.Dataset(
+        {
+            "simulated": ("case", simulated, {**attrs, "long_name": "simulated long-exposure Strehl ratio"}),
+            "simulated_error": ("case", error, {**attrs, "long_name": "Monte-Carlo standard error of simulated "
+                                                "(batch means of the per-frame axis value)"}),
+            "analytic": ("case", analytic, {**attrs, "long_name": "analytic long-exposure Strehl ratio, "
+                                            "telescope OTF x exp(-D_phi/2)"}),
+        },
+        coords=_case_coords(settings, names, datasets),
+        attrs={"detector": detector},
+    )
+
+
+def draw_long_exposure_check(ds: xr.Dataset, title: str):
+    fig, ax = plt.subplots(figsize=(7, 4.5), constrained_layout=True)
+    x = np.arange(ds.sizes["case"])
+    ax.errorbar(x - 0.08, ds.simulated, yerr=ds.simulated_error, fmt="o", capsize=3, label="simulated ±1σ")
+    ax.plot(x + 0.08, ds.analytic, "s", label="analytic")
+    ax.set_xticks(x, [f"{c}\nmean r0 {r:.1f} cm" for c, r in zip(ds.case.values, ds.r0_cm.values)], fontsize=8)
+    ax.set_ylabel("long-exposure Strehl ratio (no recentring)")
+    ax.grid(alpha=0.3)
+    ax.legend()
+    ax.set_title(title)
+    return fig
+
+
+def asterism_data(settings: dict, names, datasets) -> xr.Dataset:
+    """LGS and target pupil footprints at the chosen layer heights (cone effect:
+    diameter D (1 - h/H), centre theta h), and the fraction of the target's
+    footprint that at least one beacon footprint covers."""
+    heights = np.asarray(settings["layer_heights_m"], dtype=float)
+    cases = [settings["case_configs"][name] for name in names]
+    n_beacons = max(case["lgs"]["n_beacons"] for case in cases)
+    centre = np.full((len(cases), len(heights), n_beacons, 2), np.nan)
+    diameter = np.full((len(cases), len(heights), n_beacons), np.nan)
+    coverage = np.zeros((len(cases), len(heights)))
+    for c, case in enumerate(cases):
+        lgs = lgs_from(case["lgs"])
+        d_m = case["telescope"]["diameter_m"]
+        target = targets_from(case["targets_arcsec"][:1])[0]
+        for k, h in enumerate(heights):
+            footprints = [LineOfSight(*direction, lgs.height_m) for direction in lgs.directions_rad]
+            centre[c, k, :lgs.n_beacons] = [footprint_centre_m(los, h) for los in footprints]
+            diameter[c, k, :lgs.n_beacons] = d_m * footprint_scale(h, lgs.height_m)
+            coverage[c, k] = footprint_coverage(d_m, target, footprints, h)
+    return xr.Dataset(
+        {
+            "footprint_x_m": (("case", "layer_height_m", "beacon"), centre[..., 0],
+                              {"units": "m", "long_name": "beacon footprint centre x"}),
+            "footprint_y_m": (("case", "layer_height_m", "beacon"), centre[..., 1],
+                              {"units": "m", "long_name": "beacon footprint centre y"}),
+            "footprint_diameter_m": (("case", "layer_height_m", "beacon"), diameter,
+                                     {"units": "m", "long_name": "beacon footprint diameter"}),
+            "target_coverage": (("case", "layer_height_m"), coverage,
+                                {"units": "1", "long_name": "fraction of the target footprint seen by a beacon"}),
+            "beacon_height_m": ("case", [c["lgs"]["height_m"] for c in cases],
+                                {"units": "m", "long_name": "beacon height"}),
+            "telescope_diameter_m": ((), cases[0]["telescope"]["diameter_m"],
+                                     {"units": "m", "long_name": "telescope diameter"}),
+            "target_x_m": (("case", "layer_height_m"),
+                           np.outer([c["targets_arcsec"][0][0] * ARCSEC_RAD for c in cases], heights),
+                           {"units": "m", "long_name": "target footprint centre x"}),
+            "target_y_m": (("case", "layer_height_m"),
+                           np.outer([c["targets_arcsec"][0][1] * ARCSEC_RAD for c in cases], heights),
+                           {"units": "m", "long_name": "target footprint centre y"}),
+        },
+        coords={"case": ("case", list(names), {"long_name": "case"}),
+                "layer_height_m": ("layer_height_m", heights, {"units": "m", "long_name": "layer height"}),
+                "beacon": ("beacon", np.arange(n_beacons), {"long_name": "beacon index"})},
+    )
+
+
+def draw_asterism(ds: xr.Dataset, title: str):
+    n_case, n_height = ds.sizes["case"], ds.sizes["layer_height_m"]
+    fig, axes = plt.subplots(n_case, n_height, figsize=(3 * n_height, 3.1 * n_case), squeeze=False,
+                             constrained_layout=True)
+    d_m = float(ds.telescope_diameter_m)
+    limit = 0.5 * d_m + float(np.nanmax(np.abs(np.stack([ds.footprint_x_m, ds.footprint_y_m])))) + 0.2
+    for c in range(n_case):
+        for k in range(n_height):
+            ax = axes[c, k]
+            cell = ds.isel(case=c, layer_height_m=k)
+            ax.add_patch(plt.Circle((float(cell.target_x_m), float(cell.target_y_m)), d_m / 2, fill=False,
+                                    color="k", lw=1.5, ls="--"))
+            for b in range(ds.sizes["beacon"]):
+                if np.isfinite(cell.footprint_diameter_m[b]):
+                    ax.add_patch(plt.Circle((float(cell.footprint_x_m[b]), float(cell.footprint_y_m[b])),
+                                            float(cell.footprint_diameter_m[b]) / 2, alpha=0.25, color=f"C{b}"))
+            ax.set_xlim(-limit, limit)
+            ax.set_ylim(-limit, limit)
+            ax.set_aspect("equal")
+            ax.set_title(f"({'ab'[c] if c < 2 else c}) H = {float(cell.beacon_height_m) / 1e3:.0f} km, "
+                         f"h = {float(cell.layer_height_m) / 1e3:.2f} km\ncovered {100 * float(cell.target_coverage):.0f}%",
+                         fontsize=8)
+            ax.set_xlabel("x [m]")
+            ax.set_ylabel("y [m]")
+    fig.suptitle(f"{title}: LGS footprints (colour) and the target's (dashed)")
+    return fig
+
+
+def rms_truth_data(settings: dict, names, datasets) -> xr.Dataset:
+    """Per-frame LGS-reconstructed vs true tilt-removed rms along the target, and
+    their Pearson and rank (Spearman) correlations."""
+    from scipy.stats import pearsonr, spearmanr
+
+    lgs = np.stack([ds["lgs_rms_nm"].isel(target=0).values for ds in datasets])
+    true = np.stack([ds["true_rms_nm"].isel(target=0).values for ds in datasets])
+    return xr.Dataset(
+        {
+            "lgs_rms_nm": (("case", "frame"), lgs, dict(datasets[0]["lgs_rms_nm"].attrs)),
+            "true_rms_nm": (("case", "frame"), true, dict(datasets[0]["true_rms_nm"].attrs)),
+            "pearson": ("case", [pearsonr(a, b)[0] for a, b in zip(lgs, true)],
+                        {"units": "1", "long_name": "Pearson correlation of lgs_rms_nm and true_rms_nm"}),
+            "spearman": ("case", [spearmanr(a, b)[0] for a, b in zip(lgs, true)],
+                         {"units": "1", "long_name": "rank correlation of lgs_rms_nm and true_rms_nm"}),
+        },
+        coords={**_case_coords(settings, names, datasets),
+                "time_s": ("frame", datasets[0]["time_s"].values, {"units": "s", "long_name": "frame start time"})},
+    )
+
+
+def draw_rms_truth(ds: xr.Dataset, title: str):
+    fig, (scatter, series) = plt.subplots(1, 2, figsize=(12, 4.5), constrained_layout=True)
+    for i, case in enumerate(ds.case.values):
+        row = ds.sel(case=case)
+        scatter.plot(row.true_rms_nm, row.lgs_rms_nm, ".", ms=2, color=f"C{i}",
+                     label=f"{row.label.values}: r = {float(row.pearson):.3f}, rank r = {float(row.spearman):.3f}")
+        series.plot(ds.time_s, row.lgs_rms_nm, lw=0.8, color=f"C{i}")
+    series.plot(ds.time_s, ds.true_rms_nm.isel(case=0), lw=1.2, color="k", label="true")
+    scatter.set_xlabel("true tilt-removed rms along the target [nm]")
+    scatter.set_ylabel("LGS-reconstructed tilt-removed rms [nm]")
+    scatter.legend(fontsize=7, markerscale=5)
+    series.set_xlabel("time [s]")
+    series.set_ylabel("tilt-removed rms [nm]")
+    series.legend(fontsize=8)
+    for ax in (scatter, series):
+        ax.grid(alpha=0.3)
+    fig.suptitle(f"{title}: how well the LGS criterion tracks the truth")
+    return fig
+
+
+def _correlations(estimate: np.ndarray, truth: np.ndarray) -> tuple[float, float]:
+    from scipy.stats import pearsonr, spearmanr
+
+    return float(pearsonr(estimate, truth)[0]), float(spearmanr(estimate, truth)[0])
+
+
+def residuals_data(settings: dict, names, datasets) -> xr.Dataset:
+    """Per frame, the open-loop and pseudo-closed-loop LGS rms along the target and the
+    true corrected rms, with the correlations of each estimate with the truth."""
+    series = {name: np.stack([ds[name].isel(target=0).values for ds in datasets])
+              for name in ("lgs_rms_nm", "lgs_residual_rms_nm", "true_rms_nm")}
+    estimates = ["lgs_rms_nm", "lgs_residual_rms_nm"]
+    pairs = np.array([[_correlations(series[e][c], series["true_rms_nm"][c]) for e in estimates]
+                      for c in range(len(datasets))])  # (case, estimate, kind)
+    return xr.Dataset(
+        {
+            **{name: (("case", "frame"), values, dict(datasets[0][name].attrs)) for name, values in series.items()},
+            "pearson": (("case", "estimate"), pairs[..., 0],
+                        {"units": "1", "long_name": "Pearson correlation with true_rms_nm"}),
+            "spearman": (("case", "estimate"), pairs[..., 1],
+                         {"units": "1", "long_name": "rank correlation with true_rms_nm"}),
+        },
+        coords={**_case_coords(settings, names, datasets),
+                "estimate": ("estimate", estimates, {"long_name": "LGS estimate of the residual"}),
+                "time_s": ("frame", datasets[0]["time_s"].values, {"units": "s", "long_name": "frame start time"})},
+        attrs={"window_s": settings.get("window_s", 2.0)},
+    )
+
+
+def draw_residuals(ds: xr.Dataset, title: str):
+    n = ds.sizes["case"]
+    fig, axes = plt.subplots(n, 2, figsize=(13, 3.4 * n + 0.5), squeeze=False, constrained_layout=True,
+                             gridspec_kw={"width_ratios": [2.2, 1]})
+    shown = ds.time_s <= float(ds.time_s[0]) + ds.attrs["window_s"]
+    names = {"lgs_rms_nm": "open loop", "lgs_residual_rms_nm": "pseudo-closed loop"}
+    for c, case in enumerate(ds.case.values):
+        row = ds.sel(case=case)
+        series, scatter = axes[c]
+        series.plot(ds.time_s[shown], row.true_rms_nm[shown], color="k", lw=1.2, label="true corrected rms")
+        for k, (name, label) in enumerate(names.items()):
+            r = row.sel(estimate=name)
+            series.plot(ds.time_s[shown], row[name][shown], color=f"C{k}", lw=0.9, label=label)
+            scatter.plot(row.true_rms_nm, row[name], ".", ms=2, color=f"C{k}",
+                         label=f"{label}: r = {float(r.pearson):.2f}, rank r = {float(r.spearman):.2f}")
+        series.set_title(str(row.label.values), loc="left", fontsize=9)
+        series.set_xlabel("time [s]")
+        series.set_ylabel("tilt-removed rms along the target [nm]")
+        scatter.set_xlabel("true corrected rms [nm]")
+        scatter.set_ylabel("LGS-reconstructed rms [nm]")
+        series.legend(fontsize=7)
+        scatter.legend(fontsize=7, markerscale=5)
+        for ax in (series, scatter):
+            ax.grid(alpha=0.3)
+    fig.suptitle(f"{title}: reconstructed tilt-removed rms, open loop vs pseudo-closed loop, and the truth")
+    return fig
+
+
+def long_exposure_table_data(settings: dict, names, datasets) -> xr.Dataset:
+    """Every case's long-exposure Strehl (all frames) without and with recentring, with
+    Monte-Carlo standard errors from time blocks."""
+    detector = settings.get("detector", "noiseless")
+    strehl = [ds["long_exposure_strehl"].sel(detector=detector).isel(target=0).values for ds in datasets]
+    error = [[float(ds["long_exposure_strehl_error"].isel(target=0)),
+              float(ds["recentred_long_exposure_strehl_error"].sel(detector=detector).isel(target=0))]
+             for ds in datasets]
+    return xr.Dataset(
+        {
+            "long_exposure_strehl": (("case", "recentring"), np.array(strehl),
+                                     dict(datasets[0]["long_exposure_strehl"].attrs)),
+            "long_exposure_strehl_error": (("case", "recentring"), np.array(error), {
+                "units": "1", "long_name": "Monte-Carlo standard error of the long-exposure Strehl (batch means)"}),
+        },
+        coords={**_case_coords(settings, names, datasets), "recentring": datasets[0]["recentring"]},
+        attrs={"detector": detector},
+    )
+
+
+def draw_long_exposure_table(ds: xr.Dataset, title: str):
+    n = ds.sizes["case"]
+    fig, ax = plt.subplots(figsize=(11, 0.32 * n + 1.2), constrained_layout=True)
+    ax.axis("off")
+    cells = [[str(row.label.values)] + [f"{float(row.long_exposure_strehl.sel(recentring=r)):.4f} ± "
+                                        f"{float(row.long_exposure_strehl_error.sel(recentring=r)):.4f}"
+                                        for r in ("none", "cog")]
+             for row in (ds.sel(case=case) for case in ds.case.values)]
+    table = ax.table(cells, colLabels=["case", "long-exposure Strehl, no recentring",
+                                       "recentred (centre of gravity)"], loc="center", cellLoc="left",
+                     colWidths=[0.62, 0.19, 0.19])
+    table.auto_set_font_size(False)
+    table.set_fontsize(7.5)
+    table.scale(1, 1.25)
+    ax.set_title(f"{title}: long-exposure Strehl of every case (all frames, {ds.attrs['detector']}), ±1σ")
+    return fig
+
+
+FIGURE_KINDS = {
+    "asterism": (asterism_data, draw_asterism),
+    "rms_truth": (rms_truth_data, draw_rms_truth),
+    "quality_vs_fraction": (quality_vs_fraction_data, draw_quality_vs_fraction),
+    "long_exposure_check": (long_exposure_check_data, draw_long_exposure_check),
+    "long_exposure_table": (long_exposure_table_data, draw_long_exposure_table),
+    "residuals": (residuals_data, draw_residuals),
+}
+
+
+def draw_figure(fig_id: str, settings: dict, lucky_paths, out_prefix: str) -> None:
+    """Build, save and draw one figure from its cases' lucky datasets (in ``settings['cases']`` order;
+    none for geometry-only kinds); ``settings['case_configs']`` holds the cases' resolved configs."""
+    datasets = [open_dataset(path, "lucky") for path in lucky_paths]
+    make_data, draw = FIGURE_KINDS[settings["kind"]]
+    ds = make_data(settings, settings["cases"], datasets)
+    ds.attrs.update(provenance(f"luckyao figure {fig_id}", settings, settings.get("seed", 0)))
+    ds.attrs["case_config_sha256"] = json.dumps({n: sha256(c) for n, c in settings["case_configs"].items()})
+    write_dataset(ds, f"{out_prefix}.nc")
+    fig = draw(open_dataset(f"{out_prefix}.nc", "figure data"), fig_id)
+    for ext in ("pdf", "png"):
+        fig.savefig(f"{out_prefix}.{ext}", dpi=150)
+    plt.close(fig)
+    log.info("figure %s written", fig_id)

@@ -1,0 +1,80 @@
+"""Lucky post-processing of one case: frames + telemetry -> ``lucky.nc``.
+
+Runs ``lucky.run_lucky`` for every target and detector, and adds what the
+figures need from the telemetry: the long-exposure Strehl's Monte-Carlo error
+(batch means of the per-frame value on the axis) and the mean r0.
+"""
+
+import json
+import logging
+
+import numpy as np
+import xarray as xr
+
+from ..lucky.detector import Detector
+from ..lucky.selection import ExternalCriterion, run_lucky
+from .case import Case
+from .config import canonical_json
+from .datasets import iter_frame_blocks, open_dataset, provenance, write_dataset
+
+log = logging.getLogger(__name__)
+
+EXTERNAL_CRITERIA = (
+    ("lgs_rms", "LGS tomographic (open-loop) tilt-removed rms along the target"),
+    ("lgs_residual_rms", "LGS pseudo-closed-loop tilt-removed rms along the target"),
+)
+"""Selection criteria from the telemetry (smaller is better), when the case has them; with AO
+also the oracle ``true_rms``, the true corrected tilt-removed rms (a bound, not observable)."""
+
+
+def batch_mean_error(values: np.ndarray, n_blocks: int) -> float:
+    """Standard error of the mean of a correlated series from ``n_blocks`` batch means
+    (valid when blocks are longer than the correlation time)."""
+    usable = len(values) // n_blocks * n_blocks
+    means = np.asarray(values[:usable], dtype=float).reshape(n_blocks, -1).mean(axis=1)
+    return float(means.std(ddof=1) / np.sqrt(n_blocks))
+
+
+def lucky_case(settings: dict, frames_path, telemetry_path, out_path) -> None:
+    """Write one case's ``lucky.nc``; ``settings`` from ``config.lucky_settings``."""
+    telemetry = open_dataset(telemetry_path, "telemetry")
+    case = settings["case_config"]
+    detectors = [Detector(name, d["photons_per_frame"], d["read_noise_e"])
+                 for name, d in settings["detectors"].items()]
+    pixel_scale = Case.from_config(case).camera.pixel_scale_arcsec
+    n_frames = telemetry.sizes["frame"]
+    per_target = []
+    for target in range(telemetry.sizes["target"]):
+        log.info("target %d/%d", target + 1, telemetry.sizes["target"])
+        external = [ExternalCriterion(name, telemetry[f"{name}_nm"].values[target], False, "nm", long_name)
+                    for name, long_name in EXTERNAL_CRITERIA if f"{name}_nm" in telemetry]
+        if "lgs_residual_rms_nm" in telemetry:
+            external.append(ExternalCriterion("true_rms", telemetry.true_rms_nm.values[target], False, "nm",
+                                              "true corrected tilt-removed rms along the target (oracle)"))
+        per_target.append(run_lucky(
+            iter_frame_blocks(frames_path, target), n_frames, detectors, settings["fractions"],
+            float(telemetry.attrs["diffraction_limited_peak"]), pixel_scale, settings["seed"] + target,
+            criteria_external=external))
+    ds = xr.concat(per_target, dim="target", data_vars="all", coords="minimal", compat="override")
+    n_blocks = settings.get("error_blocks", 5)
+    errors = [batch_mean_error(telemetry.axis_strehl.values[t], n_blocks) for t in range(ds.sizes["target"])]
+    ds["long_exposure_strehl_error"] = ("target", errors, {
+        "units": "1", "long_name": f"Monte-Carlo standard error of the long-exposure Strehl (no recentring), "
+                                   f"from {n_blocks} batch means"})
+    recentred = [[batch_mean_error(v, n_blocks) for v in ds.frame_recentred_strehl.values[t]]
+                 for t in range(ds.sizes["target"])]
+    ds["recentred_long_exposure_strehl_error"] = (("target", "detector"), recentred, {
+        "units": "1", "long_name": f"Monte-Carlo standard error of the recentred long-exposure Strehl, "
+                                   f"from {n_blocks} batch means"})
+    for name in ("true_rms_nm", "lgs_rms_nm", "lgs_residual_rms_nm"):
+        if name in telemetry:
+            ds[name] = telemetry[name]
+    ds["mean_r0_500nm_m"] = ((), float(telemetry.r0_500nm_m.mean()),
+                             {"units": "m", "long_name": "mean Fried parameter at 500 nm over the case"})
+    ds = ds.assign_coords(target_x_arcsec=telemetry.target_x_arcsec, target_y_arcsec=telemetry.target_y_arcsec)
+    ds.attrs.update(provenance(f"luckyao lucky imaging of case {settings['case']}", case, settings["seed"]))
+    ds.attrs["case"] = settings["case"]
+    ds.attrs["lucky_settings_json"] = canonical_json({k: v for k, v in settings.items() if k != "case_config"})
+    ds.attrs["telemetry_config_sha256"] = telemetry.attrs["config_sha256"]
+    write_dataset(ds, out_path)
+    log.info("wrote %s: %s", out_path, json.dumps({k: int(v) for k, v in ds.sizes.items()}))

@@ -1,0 +1,97 @@
+"""The shared turbulence product: one normalised strip screen per layer, along its wind.
+
+Made once per turbulence spec (see ``config.turbulence_spec``) and read by
+every case that shares it, so those cases see the same turbulence (common
+random numbers). Stored in rad at 500 nm for r0 = 1 m, as one flat float32
+``.npy`` that cases memory-map (parallel jobs share its pages; paper-fidelity
+screens are several GB), described by a small netCDF file with provenance.
+"""
+
+import logging
+import time
+
+import numpy as np
+import xarray as xr
+
+from ..atmosphere.screens import ScreenSet, StripSpec, strip_screen, strip_spec
+from ..atmosphere.statistics import Layer
+from ..units import ARCSEC_RAD
+from .datasets import atomic_path, open_dataset, write_dataset
+
+log = logging.getLogger(__name__)
+
+
+def strip_specs(spec: dict) -> list[StripSpec]:
+    """Each layer's strip geometry for a turbulence spec."""
+    n_steps = int(np.ceil(spec["duration_s"] / spec["time_step_s"] - 1e-9)) + 1
+    specs = []
+    for height, speed, direction in zip(spec["height_m"], spec["wind_speed_m_s"], spec["wind_direction_deg"]):
+        layer = Layer(height, 1.0, speed, direction)
+        # square pupil grids reach sqrt(2) D / 2 in their corners
+        radius = 0.75 * spec["diameter_m"] + spec["field_radius_arcsec"] * ARCSEC_RAD * height
+        specs.append(strip_spec(layer, spec["time_step_s"], n_steps, spec["max_pixel_m"], radius,
+                                spec["min_along_m"], spec["min_across_m"]))
+    return specs
+
+
+def write_screens(spec: dict, screens_path, metadata_path, attrs: dict) -> None:
+    """Generate every layer's strip into one flat float32 ``.npy`` (memory-mappable)
+    and describe it in a small netCDF file. Layer ``i`` draws from
+    ``default_rng([seed, i])``; both files appear only when complete."""
+    specs = strip_specs(spec)
+    sizes = [s.n_major * s.n_minor for s in specs]
+    starts = np.concatenate([[0], np.cumsum(sizes)[:-1]]).astype(np.int64)
+    with atomic_path(screens_path) as tmp:
+        flat = np.lib.format.open_memmap(tmp, mode="w+", dtype=np.float32, shape=(sum(sizes),))
+        for i, s in enumerate(specs):
+            begin = time.perf_counter()
+            screen = strip_screen(s, spec["outer_scale_m"], np.random.default_rng([spec["seed"], i]))
+            flat[starts[i]:starts[i] + sizes[i]] = screen.ravel()
+            log.info("layer %d/%d: %d x %d samples of %.4f m in %.1f s", i + 1, len(specs),
+                     s.n_major, s.n_minor, s.dx_m, time.perf_counter() - begin)
+        flat.flush()
+        del flat
+    layer = xr.Variable(("layer",), np.arange(len(specs)), {"long_name": "layer index"})
+    ds = xr.Dataset(
+        {
+            "dx_m": ("layer", [s.dx_m for s in specs], {"units": "m", "long_name": "screen sample spacing"}),
+            "n_major": ("layer", [s.n_major for s in specs], {"units": "1", "long_name": "lines along the major axis"}),
+            "n_minor": ("layer", [s.n_minor for s in specs], {"units": "1", "long_name": "samples per line"}),
+            "major_axis": ("layer", [s.major_axis for s in specs],
+                           {"units": "1", "long_name": "sky axis of the strip's lines (0: x, 1: y)"}),
+            "skew": ("layer", [s.skew for s in specs],
+                     {"units": "1", "long_name": "minor offset of line i is floor(skew i / n_major) samples"}),
+            "origin_major_m": ("layer", [s.origin_m[0] for s in specs],
+                               {"units": "m", "long_name": "major-axis position of sample [0, 0] at t = 0"}),
+            "origin_minor_m": ("layer", [s.origin_m[1] for s in specs],
+                               {"units": "m", "long_name": "minor-axis position of sample [0, 0] at t = 0"}),
+            "step_major": ("layer", [s.step_samples[0] for s in specs],
+                           {"units": "1", "long_name": "frozen-flow shift per time step along the major axis, samples"}),
+            "step_minor": ("layer", [s.step_samples[1] for s in specs],
+                           {"units": "1", "long_name": "frozen-flow shift per time step along the minor axis, samples"}),
+            "start": ("layer", starts, {"units": "1", "long_name": "offset of the layer in the flat screen file"}),
+        },
+        coords={"layer": layer},
+        attrs={**attrs, "screens_file": str(screens_path), "phase_units": "rad at 500 nm for r0 = 1 m"},
+    )
+    write_dataset(ds, metadata_path)
+
+
+def read_screens(screens_path, metadata_path) -> ScreenSet:
+    """The screens, memory-mapped read-only, with their geometry."""
+    meta = open_dataset(metadata_path, "turbulence metadata")
+    specs = tuple(
+        StripSpec(dx_m=float(meta.dx_m[i]), n_major=int(meta.n_major[i]), n_minor=int(meta.n_minor[i]),
+                  major_axis=int(meta.major_axis[i]), skew=int(meta.skew[i]),
+                  origin_m=(float(meta.origin_major_m[i]), float(meta.origin_minor_m[i])),
+                  step_samples=(float(meta.step_major[i]), float(meta.step_minor[i])))
+        for i in range(meta.sizes["layer"]))
+    try:
+        flat = np.load(screens_path, mmap_mode="r")
+    except (OSError, ValueError) as err:
+        raise OSError(f"turbulence file '{screens_path}' is missing or corrupt ({err}); rerun its rule") from err
+    expected = int(meta.start[-1]) + specs[-1].n_major * specs[-1].n_minor
+    if flat.dtype != np.float32 or flat.shape != (expected,):
+        raise OSError(f"turbulence file '{screens_path}' holds {flat.shape} {flat.dtype}, "
+                      f"its metadata expects ({expected},) float32; rerun its rule")
+    return ScreenSet(specs, flat, meta.start.values.astype(np.int64))

@@ -1,0 +1,76 @@
+"""The workflow reruns exactly the steps whose code changed (and what follows them).
+
+Each rule's code inputs are the import closure of the module its step runs
+(``luckyao.study.code_deps``). Here a copy of the workflow and package runs a
+tiny study; then one module at a time gets a real content edit, and a dry run
+must plan exactly the steps that depend on it, by what each step computes.
+"""
+
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+import yaml
+
+REPO = Path(__file__).resolve().parents[1]
+TINY = REPO / "tests" / "data" / "tiny.yaml"
+
+# module edited -> rules that must rerun (the step that runs it and everything after it)
+EXPECTED = {
+    "atmosphere/screens.py": {"turbulence", "simulate", "lucky", "figure"},
+    "optics/farfield.py": {"simulate", "lucky", "figure"},
+    "wfs/kernels.py": {"simulate", "lucky", "figure"},
+    "lucky/metrics.py": {"lucky", "figure"},
+    "study/figures.py": {"figure"},
+    "optics/long_exposure.py": {"figure"},
+}
+
+
+def _snakemake(copy: Path, workdir: Path, *args):
+    env = dict(os.environ, PYTHONPATH=str(copy / "src"))
+    command = [sys.executable, "-m", "snakemake", "-s", str(copy / "Snakefile"), "-d", str(workdir),
+               "--cores", "2", *args]
+    return subprocess.run(command, capture_output=True, text=True, timeout=600, env=env)
+
+
+def _rules_planned(result) -> set[str]:
+    return {line.split()[1].rstrip(":") for line in result.stdout.splitlines()
+            if line.strip().startswith("rule ")} - {"all"}
+
+
+@pytest.fixture(scope="module")
+def study_copy(tmp_path_factory):
+    """A copy of the workflow and package that ran a one-case tiny study (frames kept,
+    so that post-processing can rerun alone)."""
+    copy = tmp_path_factory.mktemp("repo")
+    shutil.copy(REPO / "Snakefile", copy)
+    shutil.copytree(REPO / "workflow", copy / "workflow")
+    shutil.copytree(REPO / "src", copy / "src", ignore=shutil.ignore_patterns("__pycache__", "*.egg-info"))
+    study = yaml.safe_load(TINY.read_text())
+    study["keep_frames"] = True
+    study["cases"] = {"good": study["cases"]["good"]}
+    study["figures"] = {"quality": dict(study["figures"]["quality"], cases=["good"]),
+                        "longexp": dict(study["figures"]["longexp"], cases=["good"])}
+    workdir = copy / "run"
+    (workdir / "config").mkdir(parents=True)
+    (workdir / "config" / "config.yaml").write_text(yaml.safe_dump(study))
+    result = _snakemake(copy, workdir)
+    assert result.returncode == 0, result.stderr[-3000:]
+    assert _rules_planned(_snakemake(copy, workdir, "--dry-run")) == set()
+    return copy, workdir
+
+
+@pytest.mark.parametrize("module", sorted(EXPECTED))
+def test_a_code_edit_reruns_exactly_the_steps_that_depend_on_it(study_copy, module):
+    copy, workdir = study_copy
+    path = copy / "src" / "luckyao" / module
+    original = path.read_text()
+    try:
+        path.write_text(original + "\n_EDITED_FOR_THE_DEPENDENCY_TEST = 1\n")
+        planned = _rules_planned(_snakemake(copy, workdir, "--dry-run"))
+    finally:
+        path.write_text(original)
+    assert planned == EXPECTED[module]
