@@ -27,6 +27,15 @@ shift || true
 case "$command" in
     study)
         setup
+        # After a hard kill Snakemake keeps its lock and jobs leave *.partial files:
+        # when no Snakemake of this checkout is running, clear both before starting.
+        if ! pgrep -f "$VENV/bin/snakemake" > /dev/null; then
+            if [ -n "$(ls -A .snakemake/locks 2> /dev/null)" ]; then
+                echo "luckyao: no Snakemake is running here; removing the stale lock of a killed run" >&2
+                "$VENV/bin/snakemake" --unlock > /dev/null
+            fi
+            find results -name '*.partial' -delete 2> /dev/null || true
+        fi
         exec "$VENV/bin/snakemake" "$@"
         ;;
     test)

@@ -22,11 +22,17 @@ def _setup_logging() -> None:
                         stream=sys.stderr)
 
 
-def cmd_check(args) -> None:
-    from .config import load_study
+def cmd_check(args) -> int:
+    """One line: valid, or the problem naming the key (no traceback)."""
+    from .config import ConfigError, load_study
 
-    _, cases = load_study(*args.config)
+    try:
+        _, cases = load_study(*args.config)
+    except ConfigError as err:
+        print(f"{' + '.join(args.config)}: {err}", file=sys.stderr)
+        return 1
     print(f"{' + '.join(args.config)}: valid, {len(cases)} cases")
+    return 0
 
 
 def cmd_turbulence(args) -> None:
@@ -154,11 +160,10 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
     _setup_logging()
     try:
-        args.func(args)
+        return args.func(args) or 0
     except (ValueError, OSError) as err:
         logging.getLogger("luckyao").exception("%s", err)
         return 1
-    return 0
 
 
 if __name__ == "__main__":

@@ -9,6 +9,7 @@ few cross-key rules before any job runs; the first problem is reported as a
 import copy
 import hashlib
 import json
+import math
 from pathlib import Path
 
 import jsonschema
@@ -55,6 +56,18 @@ def _validate(instance, schema: dict, prefix: str) -> None:
     if errors:
         error = errors[0]
         raise ConfigError(f"config key '{_key_path(prefix, error)}': {error.message}")
+
+
+def _check_finite(value, where: str) -> None:
+    """Reject NaN and infinities anywhere (YAML's ``.nan``, ``.inf`` are numbers to JSON schema)."""
+    if isinstance(value, dict):
+        for key, item in value.items():
+            _check_finite(item, f"{where}.{key}" if where else str(key))
+    elif isinstance(value, list):
+        for i, item in enumerate(value):
+            _check_finite(item, f"{where}[{i}]")
+    elif isinstance(value, float) and not math.isfinite(value):
+        raise ConfigError(f"config key '{where}': {value} is not a finite number")
 
 
 def _check_case(name: str, case: dict, turbulence: dict) -> None:
@@ -106,6 +119,7 @@ def validate_study(config: dict, schema: dict | None = None) -> dict:
     Raises ``ConfigError`` naming the first offending key.
     """
     schema = schema or load_schema()
+    _check_finite(config, "")
     _validate(config, schema, "")
     case_schema = dict(schema["definitions"]["case"], definitions=schema["definitions"])
     cases = {}
@@ -113,6 +127,11 @@ def validate_study(config: dict, schema: dict | None = None) -> dict:
         resolved = deep_merge(config["base"], override)
         _validate(resolved, case_schema, f"cases.{name}")
         _check_case(name, resolved, config["turbulence"])
+        n_frames = int(resolved["duration_s"] / resolved["camera"]["frame_time_s"] + 1e-9)
+        blocks = config["lucky"].get("error_blocks", 5)
+        if n_frames < 2 * blocks:
+            raise ConfigError(f"config key 'lucky.error_blocks': {blocks} blocks need at least {2 * blocks} "
+                              f"frames, case '{name}' has {n_frames}")
         cases[name] = resolved
     for fig_id, figure in config["figures"].items():
         for case in figure["cases"]:

@@ -9,11 +9,15 @@ import datetime
 import json
 import os
 import platform
+import subprocess
 from contextlib import contextmanager
+from functools import cache
 from pathlib import Path
 
 import netCDF4
+import numba
 import numpy as np
+import pyfftw
 import scipy
 import xarray as xr
 
@@ -21,8 +25,29 @@ from .. import __version__
 from .config import canonical_json, sha256
 
 
+@cache
+def code_version() -> str:
+    """The package version, with the git commit of its source tree and ``+dirty`` when
+    that tree has uncommitted changes (``git`` absent or no checkout: the version alone)."""
+    source = Path(__file__).resolve().parents[1]
+    try:
+        def git(*args):
+            return subprocess.run(["git", "-C", str(source), *args], capture_output=True, text=True,
+                                  timeout=10, check=True).stdout.strip()
+        commit = git("rev-parse", "HEAD")
+        dirty = bool(git("status", "--porcelain", "--untracked-files=no", "--", "."))
+    except (OSError, subprocess.SubprocessError):
+        return __version__
+    return f"{__version__} git {commit}{' +dirty' if dirty else ''}"
+
+
 def provenance(title: str, config: dict, seed: int) -> dict:
-    """Global attributes: the config as JSON, its sha256, code version, seed, libraries."""
+    """Global attributes: the config as JSON, its sha256, code version, seed, and the
+    versions of every library that shapes the numbers."""
+    libraries = {"python": platform.python_version(), "numpy": np.__version__, "scipy": scipy.__version__,
+                 "numba": numba.__version__, "pyfftw": pyfftw.__version__, "xarray": xr.__version__,
+                 "netCDF4": netCDF4.__version__, "netcdf_library": netCDF4.__netcdf4libversion__,
+                 "hdf5_library": netCDF4.__hdf5libversion__}
     return {
         "Conventions": "CF-1.8",
         "title": title,
@@ -30,12 +55,21 @@ def provenance(title: str, config: dict, seed: int) -> dict:
         "history": f"{datetime.datetime.now(datetime.timezone.utc).isoformat(timespec='seconds')} created by luckyao",
         "config_json": canonical_json(config),
         "config_sha256": sha256(config),
-        "code_version": __version__,
+        "code_version": code_version(),
         "seed": int(seed),
-        "library_versions": json.dumps({
-            "python": platform.python_version(), "numpy": np.__version__, "scipy": scipy.__version__,
-            "xarray": xr.__version__, "netCDF4": netCDF4.__version__}),
+        "library_versions": json.dumps(libraries),
     }
+
+
+def require_finite(values, what: str, variable: str, index_names=()) -> None:
+    """Raise ``ValueError`` naming ``what`` (a file or a stage), the variable and the first
+    non-finite element's index, if ``values`` holds NaN or an infinity: nothing wrong is
+    ever taken as a result."""
+    finite = np.isfinite(values)
+    if not finite.all():
+        index = np.unravel_index(np.argmin(finite), np.shape(values))
+        where = ", ".join(f"{n}={i}" for n, i in zip(index_names, index)) if index_names else str(tuple(map(int, index)))
+        raise ValueError(f"{what}: variable '{variable}' is not finite at {where}")
 
 
 @contextmanager
@@ -52,8 +86,12 @@ def atomic_path(path):
             partial.unlink()
 
 
-def write_dataset(ds: xr.Dataset, path, compress: bool = True) -> None:
-    """Write ``ds`` to netCDF4 atomically; floats compressed with zlib + shuffle."""
+def write_dataset(ds: xr.Dataset, path, compress: bool = True, allow_nan=()) -> None:
+    """Write ``ds`` to netCDF4 atomically; floats compressed with zlib + shuffle. Every
+    float variable must be finite, except those in ``allow_nan`` (NaN meaning "none")."""
+    for name, var in ds.data_vars.items():
+        if var.dtype.kind == "f" and name not in allow_nan:
+            require_finite(var.values, f"file '{path}'", name, var.dims)
     encoding = {}
     if compress:
         for name, var in ds.data_vars.items():
@@ -87,6 +125,7 @@ class FrameWriter:
     def __init__(self, path, n_targets: int, n_frames: int, n_pixels: int,
                  pixel_scale_arcsec: float, attrs: dict):
         self._atomic = atomic_path(path)
+        self._atomic_target = path
         self._shape = (n_targets, n_frames, n_pixels)
         self._pixel_scale = pixel_scale_arcsec
         self._attrs = attrs
@@ -111,6 +150,10 @@ class FrameWriter:
 
     def write(self, start: int, block: np.ndarray) -> None:
         """Frames ``start:start+k`` for every target from ``block`` (target, k, y, x)."""
+        try:
+            require_finite(block, f"frames file '{self._atomic_target}'", "frames", ("target", "frame", "y", "x"))
+        except ValueError as err:
+            raise ValueError(f"{err} (block from frame {start})") from None
         self.frames[:, start:start + block.shape[1]] = block
 
     def __exit__(self, exc_type, exc, tb):

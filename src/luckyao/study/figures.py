@@ -375,7 +375,7 @@ def draw_figure(fig_id: str, settings: dict, lucky_paths, out_prefix: str) -> No
     ds = make_data(settings, settings["cases"], datasets)
     ds.attrs.update(provenance(f"luckyao figure {fig_id}", settings, settings.get("seed", 0)))
     ds.attrs["case_config_sha256"] = json.dumps({n: sha256(c) for n, c in settings["case_configs"].items()})
-    write_dataset(ds, f"{out_prefix}.nc")
+    write_dataset(ds, f"{out_prefix}.nc", allow_nan=set(ds.data_vars))  # drawn data; inputs are checked
     fig = draw(open_dataset(f"{out_prefix}.nc", "figure data"), fig_id)
     for ext in ("pdf", "png"):
         fig.savefig(f"{out_prefix}.{ext}", dpi=150)

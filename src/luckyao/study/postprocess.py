@@ -76,5 +76,6 @@ def lucky_case(settings: dict, frames_path, telemetry_path, out_path) -> None:
     ds.attrs["case"] = settings["case"]
     ds.attrs["lucky_settings_json"] = canonical_json({k: v for k, v in settings.items() if k != "case_config"})
     ds.attrs["telemetry_config_sha256"] = telemetry.attrs["config_sha256"]
-    write_dataset(ds, out_path)
+    # per-frame values may be NaN (a frame without detected flux); the results may not
+    write_dataset(ds, out_path, allow_nan={name for name in ds.data_vars if name.startswith("frame_")})
     log.info("wrote %s: %s", out_path, json.dumps({k: int(v) for k, v in ds.sizes.items()}))

@@ -26,6 +26,7 @@ from ..tomography.criterion import LgsRmsEstimator, lucky_frame_rms_nm
 from ..units import ARCSEC_RAD, REFERENCE_WAVELENGTH_M, phase_rad_to_nm
 from ..wfs.sensor import LgsSensor
 from .case import Case
+from .datasets import require_finite
 
 
 def lgs_chain(case: Case, screens: ScreenSet, reconstructors: np.ndarray,
@@ -87,6 +88,8 @@ def simulate(case: Case, screens: ScreenSet, write_frames, sensor: LgsSensor | N
                 starts = steps[::e]
                 slopes = np.stack([sensor.exposure_slopes(steps[i:i + e], layer_scales[i:i + e])
                                    for i in range(0, spf, e)])
+                require_finite(slopes, f"LGS slopes of frame {frame}", "slopes",
+                               ("exposure", "beacon", "axis", "subaperture"))
                 lgs_rms[:, frame] = lucky_frame_rms_nm(estimator.rms_nm(slopes))
                 if correction is not None:
                     for start_step, exposure in zip(starts, slopes):
@@ -96,7 +99,9 @@ def simulate(case: Case, screens: ScreenSet, write_frames, sensor: LgsSensor | N
                     lgs_residual_rms[:, frame] = lucky_frame_rms_nm(estimator.rms_nm(residual))
             intensity.fill(0.0)  # phase source -> correction -> imager and truth
             rms2 = np.zeros(n_targets)
-            for step, phase_500 in zip(steps, propagator.sample_valid(steps, layer_scales)):  # (n_targets, n_valid)
+            phases = propagator.sample_valid(steps, layer_scales)  # (k, n_targets, n_valid)
+            require_finite(phases, f"science phases of frame {frame}", "phase", ("step", "target", "sample"))
+            for step, phase_500 in zip(steps, phases):
                 if correction is not None:
                     phase_500 = phase_500 - correction.surface_at(int(step))
                 imager.accumulate(phase_500 * to_camera, intensity)

@@ -16,7 +16,7 @@ import xarray as xr
 from ..atmosphere.screens import ScreenSet, StripSpec, strip_screen, strip_spec
 from ..atmosphere.statistics import Layer
 from ..units import ARCSEC_RAD
-from .datasets import atomic_path, open_dataset, write_dataset
+from .datasets import atomic_path, open_dataset, require_finite, write_dataset
 
 log = logging.getLogger(__name__)
 
@@ -94,4 +94,9 @@ def read_screens(screens_path, metadata_path) -> ScreenSet:
     if flat.dtype != np.float32 or flat.shape != (expected,):
         raise OSError(f"turbulence file '{screens_path}' holds {flat.shape} {flat.dtype}, "
                       f"its metadata expects ({expected},) float32; rerun its rule")
+    for begin in range(0, flat.size, 1 << 24):  # memory-mapped: check in 64 MB chunks
+        try:
+            require_finite(flat[begin:begin + (1 << 24)], f"turbulence file '{screens_path}'", "screens")
+        except ValueError as err:
+            raise ValueError(f"{err} (offset from {begin}); rerun its rule") from None
     return ScreenSet(specs, flat, meta.start.values.astype(np.int64))

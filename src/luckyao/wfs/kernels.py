@@ -250,8 +250,8 @@ def pixel_weights(spot, ey, ex, norm, w):  # pragma: no cover (jit)
 
 @numba.njit(cache=True, nogil=True)
 def centroids(images, x_rad, remove_tilt, out):  # pragma: no cover (jit)
-    """out[b, :, v] = centre of gravity (x, y) [rad] of images[b, v] (0 without flux),
-    less its mean over v if ``remove_tilt``."""
+    """out[b, :, v] = centre of gravity (x, y) [rad] of images[b, v] (0 without flux, NaN
+    for a NaN or negative total), less its mean over v if ``remove_tilt``."""
     n_b, n_v, n_p = images.shape[0], images.shape[1], images.shape[2]
     for b in range(n_b):
         for v in range(n_v):
@@ -264,8 +264,15 @@ def centroids(images, x_rad, remove_tilt, out):  # pragma: no cover (jit)
                     flux += w
                     sx += w * x_rad[k]
                     sy += w * x_rad[j]
-            out[b, 0, v] = sx / flux if flux > 0 else 0.0
-            out[b, 1, v] = sy / flux if flux > 0 else 0.0
+            if flux > 0.0:
+                out[b, 0, v] = sx / flux
+                out[b, 1, v] = sy / flux
+            elif flux == 0.0:  # no light (or read noise summing to nothing): no information
+                out[b, 0, v] = 0.0
+                out[b, 1, v] = 0.0
+            else:  # NaN in the image, or a negative total from read noise: never a plausible number
+                out[b, 0, v] = np.nan
+                out[b, 1, v] = np.nan
         if remove_tilt:
             for axis in range(2):
                 out[b, axis] -= out[b, axis].mean()

@@ -1,0 +1,81 @@
+"""Nothing wrong is taken as a result: non-finite values and impossible combinations
+are refused with a message naming where, before any compute when they can be known."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from luckyao.study.config import ConfigError, validate_study
+from luckyao.study.datasets import FrameWriter
+from luckyao.study.turbulence import read_screens, write_screens
+from luckyao.wfs.kernels import centroids
+
+TINY = Path(__file__).parent / "data" / "tiny.yaml"
+
+
+def tiny() -> dict:
+    return yaml.safe_load(TINY.read_text())
+
+
+@pytest.mark.parametrize("value", [float("nan"), float("inf")])
+def test_non_finite_config_values_are_rejected_naming_the_key(value):
+    study = tiny()
+    study["cases"]["good"]["atmosphere"]["r0_500nm_m"] = value
+    with pytest.raises(ConfigError, match=r"cases\.good\.atmosphere\.r0_500nm_m"):
+        validate_study(study)
+
+
+def test_a_criterion_the_case_cannot_give_is_rejected_before_any_job():
+    study = tiny()
+    study["figures"]["quality"]["criteria"] = ["lgs_rms"]  # cases good, bad have no LGS
+    with pytest.raises(ConfigError, match=r"figures\.quality\.cases.*'good'.*lgs_rms"):
+        validate_study(study)
+    study = tiny()
+    study["figures"]["lgsrms"]["criteria"] = ["lgs_residual_rms"]  # case lgs has LGS but no AO
+    with pytest.raises(ConfigError, match=r"lgs_residual_rms \(needs AO\)"):
+        validate_study(study)
+
+
+def test_error_blocks_need_frames_and_fractions_are_distinct():
+    study = tiny()
+    study["lucky"]["error_blocks"] = 15  # 0.2 s = 20 frames < 2 x 15
+    with pytest.raises(ConfigError, match=r"lucky\.error_blocks"):
+        validate_study(study)
+    study = tiny()
+    study["lucky"]["fractions"] = [0.1, 0.1, 1.0]
+    with pytest.raises(ConfigError, match=r"lucky\.fractions"):
+        validate_study(study)
+
+
+def test_nan_in_the_screens_file_is_a_named_error(tmp_path):
+    study = tiny()
+    spec = {"seed": 1, **study["turbulence"], "time_step_s": 0.0025, "diameter_m": 4.2, "outer_scale_m": 20.0,
+            "height_m": [0.0], "wind_speed_m_s": [10.0], "wind_direction_deg": [0.0]}
+    screens, metadata = tmp_path / "s.npy", tmp_path / "s.nc"
+    write_screens(spec, screens, metadata, {})
+    flat = np.load(screens, mmap_mode="r+")
+    flat[1234] = np.nan  # same size, still a valid .npy
+    flat.flush()
+    del flat
+    with pytest.raises(ValueError, match=r"turbulence file '.*s\.npy'.*'screens'.*\(1234,\)"):
+        read_screens(screens, metadata)
+
+
+def test_the_centroid_of_a_nan_image_is_nan_not_zero():
+    images = np.ones((1, 3, 4, 4), dtype=np.float32)
+    images[0, 1, 2, 2] = np.nan
+    out = np.empty((1, 2, 3), dtype=np.float32)
+    centroids(images, np.arange(4, dtype=np.float64), True, out)
+    assert np.all(np.isnan(out[0, :, 1]))
+
+
+def test_a_non_finite_frame_is_never_written(tmp_path):
+    path = tmp_path / "frames.nc"
+    with pytest.raises(ValueError, match=r"frames file .*'frames'.*frame=1"):
+        with FrameWriter(path, 1, 4, 8, 0.1, {}) as writer:
+            block = np.ones((1, 2, 8, 8), dtype=np.float32)
+            block[0, 1, 3, 3] = np.inf
+            writer.write(0, block)
+    assert not path.exists() and not path.with_name("frames.nc.partial").exists()
