@@ -28,13 +28,22 @@ case "$command" in
     study)
         setup
         # After a hard kill Snakemake keeps its lock and jobs leave *.partial files:
-        # when no Snakemake of this checkout is running, clear both before starting.
+        # when no Snakemake of this checkout is running, clear both before starting
+        # (in the study folder: this one, or the one given by -d / --directory).
+        local_dir=.
+        args=("$@")
+        for ((i = 0; i < ${#args[@]}; i++)); do
+            case "${args[i]}" in
+                -d|--directory) local_dir="${args[i + 1]:-.}" ;;
+                --directory=*) local_dir="${args[i]#--directory=}" ;;
+            esac
+        done
         if ! pgrep -f "$VENV/bin/snakemake" > /dev/null; then
-            if [ -n "$(ls -A .snakemake/locks 2> /dev/null)" ]; then
+            if [ -n "$(ls -A "$local_dir/.snakemake/locks" 2> /dev/null)" ]; then
                 echo "luckyao: no Snakemake is running here; removing the stale lock of a killed run" >&2
-                "$VENV/bin/snakemake" --unlock > /dev/null
+                "$VENV/bin/snakemake" --unlock -d "$local_dir" > /dev/null
             fi
-            find results -name '*.partial' -delete 2> /dev/null || true
+            find "$local_dir/results" -name '*.partial' -delete 2> /dev/null || true
         fi
         exec "$VENV/bin/snakemake" "$@"
         ;;

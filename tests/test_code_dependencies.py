@@ -74,3 +74,12 @@ def test_a_code_edit_reruns_exactly_the_steps_that_depend_on_it(study_copy, modu
     finally:
         path.write_text(original)
     assert planned == EXPECTED[module]
+
+
+def test_a_post_processing_setting_reruns_no_time_loop(study_copy):
+    """A new selection fraction or detector changes only the lucky step's params: with
+    the frames kept (the quick study's default), no simulation reruns."""
+    copy, workdir = study_copy
+    overlay = workdir / "fractions.yaml"
+    overlay.write_text(yaml.safe_dump({"lucky": {"fractions": [0.05, 0.1, 0.5, 1.0]}}))
+    assert _rules_planned(_snakemake(copy, workdir, "--dry-run", "--configfile", str(overlay))) == {"lucky", "figure"}

@@ -79,3 +79,17 @@ def test_a_non_finite_frame_is_never_written(tmp_path):
             block[0, 1, 3, 3] = np.inf
             writer.write(0, block)
     assert not path.exists() and not path.with_name("frames.nc.partial").exists()
+
+
+def test_every_problem_is_reported_one_line_each():
+    study = tiny()
+    study["cases"]["good"]["atmosphere"]["r0_500nm_m"] = -0.2
+    study["cases"]["bad"]["ao"] = {**study["base"]["ao"], "mode": "ltao"}  # AO without LGS
+    study["figures"]["quality"]["detector"] = "nope"
+    with pytest.raises(ConfigError) as caught:
+        validate_study(study)
+    lines = str(caught.value).splitlines()
+    assert len(lines) == 3
+    assert any("cases.good.atmosphere.r0_500nm_m" in line for line in lines)
+    assert any("cases.bad.ao.mode" in line for line in lines)
+    assert any("figures.quality.detector" in line for line in lines)

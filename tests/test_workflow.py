@@ -2,11 +2,15 @@
 incremental reruns and config errors."""
 
 import json
+import os
 import shutil
+import signal
 import subprocess
 import sys
+import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 import xarray as xr
 import yaml
@@ -109,3 +113,44 @@ def test_invalid_config_fails_before_any_job_naming_the_key(tmp_path):
     message = result.stdout + result.stderr
     assert "cases.good.atmosphere.r0_500nm_m" in message
     assert not (tmp_path / "results").exists()
+
+
+def test_a_hard_kill_mid_study_is_recovered_by_the_study_command(finished_run, tmp_path):
+    """SIGKILL of Snakemake and its jobs while a simulation runs leaves a stale lock;
+    the README's study command (``run.sh study``) alone then finishes the study, leaves
+    no ``*.partial`` file, and gives the numbers of an uninterrupted run (the same
+    tiny study in ``finished_run``)."""
+    workdir = tmp_path / "killed"
+    write_config(workdir)
+    command = ["bash", str(REPO / "run.sh"), "study", "-d", str(workdir), "--cores", "2"]
+    first = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+    deadline = time.monotonic() + 300
+    while time.monotonic() < deadline and not list((workdir / "logs" / "simulate").glob("*.log")):
+        time.sleep(0.2)
+    time.sleep(1.0)  # inside the time loop
+    os.killpg(first.pid, signal.SIGKILL)
+    first.wait()
+    assert any((workdir / ".snakemake" / "locks").iterdir()), "the kill left no lock: the test proves nothing"
+    result = subprocess.run(command, capture_output=True, text=True, timeout=600)
+    assert result.returncode == 0, result.stderr[-3000:]
+    assert not list((workdir / "results").rglob("*.partial"))
+    done, _ = finished_run
+    compared = sorted((done / "results" / "cases").glob("*/lucky.nc")) + sorted((done / "figures").glob("*.nc"))
+    assert compared
+    for path in compared:
+        expected = xr.open_dataset(path)
+        got = xr.open_dataset(workdir / path.relative_to(done))
+        for name in expected.data_vars:
+            np.testing.assert_array_equal(got[name].values, expected[name].values, err_msg=f"{path.name}: {name}")
+
+
+def test_a_command_line_override_is_applied_not_ignored(finished_run):
+    """``--config seed=5`` changes the seed every product derives from: the dry run plans
+    new screens and reruns every case; an override that breaks the schema is refused."""
+    workdir, _ = finished_run
+    result = snakemake(workdir, "--dry-run", "--config", "seed=5")
+    assert result.returncode == 0, result.stderr
+    rules = {rule for rule, _ in jobs_planned(result)}
+    assert {"turbulence", "simulate", "lucky", "figure"} <= rules
+    refused = snakemake(workdir, "--dry-run", "--config", "seed=-1")
+    assert refused.returncode != 0 and "config key 'seed'" in refused.stdout + refused.stderr

@@ -10,7 +10,7 @@ from luckyao.study.config import (ConfigError, canonical_json, commands_key, com
 try:
     CASES = validate_study(config)
 except ConfigError as err:
-    sys.exit(f"luckyao: invalid study config: {err}")
+    sys.exit("\n".join(f"luckyao: invalid study config: {problem}" for problem in str(err).splitlines()))
 STUDY = config
 
 TURBULENCE = {name: turbulence_spec(STUDY, case) for name, case in CASES.items()}

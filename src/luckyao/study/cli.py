@@ -23,13 +23,14 @@ def _setup_logging() -> None:
 
 
 def cmd_check(args) -> int:
-    """One line: valid, or the problem naming the key (no traceback)."""
+    """One line: valid, or one line per problem naming its key (no traceback)."""
     from .config import ConfigError, load_study
 
     try:
         _, cases = load_study(*args.config)
     except ConfigError as err:
-        print(f"{' + '.join(args.config)}: {err}", file=sys.stderr)
+        for problem in str(err).splitlines():
+            print(f"{' + '.join(args.config)}: {problem}", file=sys.stderr)
         return 1
     print(f"{' + '.join(args.config)}: valid, {len(cases)} cases")
     return 0

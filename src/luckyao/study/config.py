@@ -51,11 +51,11 @@ def _key_path(prefix: str, error: jsonschema.ValidationError) -> str:
 
 
 def _validate(instance, schema: dict, prefix: str) -> None:
+    """Every schema violation of ``instance``, one line each, naming its key."""
     validator = jsonschema.Draft7Validator(schema)
     errors = sorted(validator.iter_errors(instance), key=lambda e: list(e.absolute_path))
     if errors:
-        error = errors[0]
-        raise ConfigError(f"config key '{_key_path(prefix, error)}': {error.message}")
+        raise ConfigError("\n".join(f"config key '{_key_path(prefix, e)}': {e.message}" for e in errors))
 
 
 def _check_finite(value, where: str) -> None:
@@ -116,42 +116,59 @@ def _check_case(name: str, case: dict, turbulence: dict) -> None:
 def validate_study(config: dict, schema: dict | None = None) -> dict:
     """Check a study config; returns ``{case name: resolved case config}``.
 
-    Raises ``ConfigError`` naming the first offending key.
+    Raises ``ConfigError`` with one line per problem, each naming its key: every
+    schema violation of the study, then the first problem of each case and of each
+    figure.
     """
     schema = schema or load_schema()
     _check_finite(config, "")
     _validate(config, schema, "")
     case_schema = dict(schema["definitions"]["case"], definitions=schema["definitions"])
-    cases = {}
+    cases, problems = {}, []
     for name, override in config["cases"].items():
         resolved = deep_merge(config["base"], override)
-        _validate(resolved, case_schema, f"cases.{name}")
-        _check_case(name, resolved, config["turbulence"])
-        n_frames = int(resolved["duration_s"] / resolved["camera"]["frame_time_s"] + 1e-9)
-        blocks = config["lucky"].get("error_blocks", 5)
-        if n_frames < 2 * blocks:
-            raise ConfigError(f"config key 'lucky.error_blocks': {blocks} blocks need at least {2 * blocks} "
-                              f"frames, case '{name}' has {n_frames}")
+        try:
+            _validate(resolved, case_schema, f"cases.{name}")
+            _check_case(name, resolved, config["turbulence"])
+            n_frames = int(resolved["duration_s"] / resolved["camera"]["frame_time_s"] + 1e-9)
+            blocks = config["lucky"].get("error_blocks", 5)
+            if n_frames < 2 * blocks:
+                raise ConfigError(f"config key 'lucky.error_blocks': {blocks} blocks need at least {2 * blocks} "
+                                  f"frames, case '{name}' has {n_frames}")
+        except ConfigError as err:
+            problems.append(str(err))
+            continue
         cases[name] = resolved
     for fig_id, figure in config["figures"].items():
-        for case in figure["cases"]:
-            if case not in cases:
-                raise ConfigError(f"config key 'figures.{fig_id}.cases': unknown case '{case}'")
-        if figure["kind"] == "quality_vs_fraction" and "criteria" not in figure:
-            raise ConfigError(f"config key 'figures.{fig_id}.criteria': required for {figure['kind']}")
-        for case in figure["cases"]:
-            produced = criteria_of(cases[case])
-            needed = set(figure.get("criteria", []))
-            needed |= {"lgs_rms"} if figure["kind"] == "rms_truth" else set()
-            needed |= {"lgs_residual_rms"} if figure["kind"] == "residuals" else set()
-            if needed - produced:
-                raise ConfigError(f"config key 'figures.{fig_id}.cases': case '{case}' cannot give "
-                                  f"{', '.join(sorted(needed - produced))} (needs "
-                                  f"{'LGS' if 'lgs_rms' in needed - produced else 'AO'})")
-        detector = figure.get("detector")
-        if detector is not None and detector not in config["lucky"]["detectors"]:
-            raise ConfigError(f"config key 'figures.{fig_id}.detector': unknown detector '{detector}'")
+        try:
+            _check_figure(fig_id, figure, cases, config)
+        except ConfigError as err:
+            problems.append(str(err))
+    if problems:
+        raise ConfigError("\n".join(problems))
     return cases
+
+
+def _check_figure(fig_id: str, figure: dict, cases: dict, config: dict) -> None:
+    for case in figure["cases"]:
+        if case not in config["cases"]:
+            raise ConfigError(f"config key 'figures.{fig_id}.cases': unknown case '{case}'")
+    if figure["kind"] == "quality_vs_fraction" and "criteria" not in figure:
+        raise ConfigError(f"config key 'figures.{fig_id}.criteria': required for {figure['kind']}")
+    for case in figure["cases"]:
+        if case not in cases:  # invalid itself: reported with the cases
+            continue
+        produced = criteria_of(cases[case])
+        needed = set(figure.get("criteria", []))
+        needed |= {"lgs_rms"} if figure["kind"] == "rms_truth" else set()
+        needed |= {"lgs_residual_rms"} if figure["kind"] == "residuals" else set()
+        if needed - produced:
+            raise ConfigError(f"config key 'figures.{fig_id}.cases': case '{case}' cannot give "
+                              f"{', '.join(sorted(needed - produced))} (needs "
+                              f"{'LGS' if 'lgs_rms' in needed - produced else 'AO'})")
+    detector = figure.get("detector")
+    if detector is not None and detector not in config["lucky"]["detectors"]:
+        raise ConfigError(f"config key 'figures.{fig_id}.detector': unknown detector '{detector}'")
 
 
 def criteria_of(case: dict) -> set[str]:
