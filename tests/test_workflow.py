@@ -62,7 +62,7 @@ def finished_run(tmp_path_factory):
 
 def test_tiny_study_makes_every_figure_with_provenance(finished_run):
     workdir, _ = finished_run
-    for fig in ("quality", "longexp"):
+    for fig in ("quality", "longexp", "lgsrms", "residuals", "table", "noise"):
         for ext in ("pdf", "png", "nc"):
             assert (workdir / "figures" / f"{fig}.{ext}").stat().st_size > 0
     lucky = xr.open_dataset(workdir / "results" / "cases" / "good" / "lucky.nc")

@@ -4,8 +4,8 @@ import sys
 
 from luckyao.study.code_deps import step_sources
 from luckyao.study.config import (ConfigError, canonical_json, commands_key, commands_spec, lucky_settings,
-                                  reconstructor_key, reconstructor_spec, turbulence_key, turbulence_spec,
-                                  validate_study)
+                                  reconstructor_key, reconstructor_spec, sweep_detectors, turbulence_key,
+                                  turbulence_spec, validate_study)
 
 try:
     CASES = validate_study(config)

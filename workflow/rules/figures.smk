@@ -17,9 +17,10 @@ rule figure:
 
 
 def figure_settings(fig):
-    """The figure's config, its cases' resolved configs and the seed."""
+    """The figure's config, its cases' resolved configs, the seed, and the detector sweep."""
     figure = STUDY["figures"][fig]
-    return {**figure, "seed": STUDY["seed"], "case_configs": {c: CASES[c] for c in figure["cases"]}}
+    sweep = {"sweep_detectors": sweep_detectors(STUDY["lucky"])} if figure["kind"] == "quality_vs_signal" else {}
+    return {**figure, "seed": STUDY["seed"], "case_configs": {c: CASES[c] for c in figure["cases"]}, **sweep}
 
 
 def figure_inputs(fig):

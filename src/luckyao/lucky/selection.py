@@ -12,6 +12,7 @@ the optical axis on pixel ``(n/2, n/2)``; detector noise (:mod:`luckyao.lucky.de
 is applied here, so one simulated cube serves every detector model.
 """
 
+import zlib
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass
 
@@ -117,10 +118,37 @@ def shift_and_add(frames: np.ndarray) -> np.ndarray:
     return shift_frames(frames, shifts).sum(axis=0, dtype=np.float64)
 
 
-def _noisy(frames: np.ndarray, detector: Detector, seed: int, i_detector: int,
-           start: int) -> np.ndarray:
-    """Detector frames of one chunk; the rng is ``default_rng([seed, i_detector, start])``."""
-    return apply_detector(frames, detector, np.random.default_rng([seed, i_detector, start]))
+def detector_key(name: str) -> int:
+    """Stable integer of a detector's name that keys its noise: ``zlib.crc32`` of its UTF-8.
+
+    Not Python's ``hash`` (salted per process), so draws are reproducible across runs.
+    """
+    return zlib.crc32(name.encode("utf-8"))
+
+
+def _noisy(frames: np.ndarray, detector: Detector, seed: int, start: int) -> np.ndarray:
+    """Detector frames of one chunk; the rng is ``default_rng([seed, detector_key(name),
+    start])``: the draws depend on the detector's name, not on the other detectors."""
+    return apply_detector(frames, detector,
+                          np.random.default_rng([seed, detector_key(detector.name), start]))
+
+
+def _score(partial: np.ndarray, n: int, n_bins: int, last_bin: np.ndarray,
+           encircled: EncircledEnergy, diffraction_limited_peak: float,
+           pixel_scale_arcsec: float) -> tuple[np.ndarray, ...]:
+    """Integrated images of the (det, criterion x bin, n x n) partial sums (cumulative sums
+    of the bins of each fraction), as (criterion, fraction, det, n, n), and their Strehl,
+    FWHM [arcsec] and d50 [arcsec] (criterion, fraction, det). One code path for the noisy
+    and the noiseless sums, so equal sums give bit-identical scores."""
+    n_det, rows, _ = partial.shape
+    cumulative = np.cumsum(partial.reshape(n_det, rows // n_bins, n_bins, n, n), axis=2)
+    images = cumulative[:, :, last_bin]  # (det, crit, fraction, n, n)
+    del cumulative
+    images = np.moveaxis(images, 0, 2)  # (crit, fraction, det, n, n)
+    s_int = strehl(images, diffraction_limited_peak)
+    d50_int = 2 * encircled.radius_px(images) * pixel_scale_arcsec
+    fwhm_int = fwhm_arcsec(images, pixel_scale_arcsec)
+    return images, s_int, fwhm_int, d50_int
 
 
 def _chunks(iter_chunks: Callable[[], Iterable[tuple[int, np.ndarray]]],
@@ -165,20 +193,31 @@ def run_lucky(iter_chunks: Callable[[], Iterable[tuple[int, np.ndarray]]], n_fra
     ``pixel_scale_arcsec`` [arcsec/pixel]. Criteria: ``strehl`` and ``d50`` of each
     noisy frame, then ``criteria_external`` (each (n_frames,)).
 
-    Pass 1 applies each detector's noise (rng ``default_rng([seed, i_detector,
-    start])``), measures per-frame Strehl, d50 and centre of gravity, and sums the
+    Pass 1 applies each detector's noise (rng ``default_rng([seed,
+    detector_key(name), start])`` (:func:`detector_key`): a detector's draws depend on the
+    seed and its name only, not on the other detectors, so detector names must be
+    distinct), measures per-frame Strehl, d50 and centre of gravity, and sums the
     long exposure without recentring. Frames are then ranked
     per criterion (:func:`rank_frames`) and assigned to nested bins
     (:func:`selection_bins`). Pass 2 regenerates the same noise, recentres each frame
     (:func:`recentring_shifts_px`, :func:`shift_frames`) and adds it into its
     (criterion, bin) partial sum with one matrix product per chunk, and into the
     recentred long exposure (all frames); each fraction's
-    image is the cumulative sum of its bins. Both passes serve all detectors, so the
-    frames are read twice in total. Memory: the partial sums, float64
-    (detectors x criteria x distinct counts x n x n), plus one chunk.
+    image is the cumulative sum of its bins. Alongside, the noiseless frames (the input,
+    as float32) get the same detector's shifts (from the noisy centroids) and the same
+    bins (from the noisy ranking) into a second set of partial sums: the ``*_noiseless``
+    scores separate a wrong selection or recentring from the noise in the final image.
+    For a noiseless detector both sets receive the very same products, so the
+    ``*_noiseless`` values equal the others bit for bit. Both passes serve all
+    detectors, so the frames are read twice in total. Memory: the two sets of partial
+    sums, float64 (2 x detectors x criteria x distinct counts x n x n, the noiseless set
+    doubling what the noisy one alone needs), plus one chunk and, when scoring, the
+    integrated images (criteria x fractions x detectors x n x n) of one set at a time.
 
     Returns a CF-style :class:`xarray.Dataset`: ``strehl``, ``fwhm_arcsec``,
-    ``d50_arcsec`` (criterion, fraction, detector); ``long_exposure_strehl``,
+    ``d50_arcsec`` (criterion, fraction, detector) and the same of the noiseless frames
+    with the same selection and shifts, ``strehl_noiseless``, ``fwhm_arcsec_noiseless``,
+    ``d50_arcsec_noiseless``; ``long_exposure_strehl``,
     ``long_exposure_fwhm_arcsec``, ``long_exposure_d50_arcsec`` (recentring,
     detector); per-frame ``frame_strehl``, ``frame_d50_arcsec``,
     ``frame_centroid_px`` (detector, frame[, axis]) and ``frame_criterion``
@@ -195,6 +234,9 @@ def run_lucky(iter_chunks: Callable[[], Iterable[tuple[int, np.ndarray]]], n_fra
         if np.shape(c.values) != (n_frames,):
             raise ValueError(f"criterion {c.name}: values must have shape ({n_frames},)")
     n_det, n_crit = len(detectors), len(criteria)
+    names = [d.name for d in detectors]
+    if len(set(names)) != n_det or len({detector_key(name) for name in names}) != n_det:
+        raise ValueError(f"detector names must be distinct (and their crc32 too): {names}")
 
     # pass 1: per-frame metrics and centroids, long exposure without recentring
     frame_strehl = np.full((n_det, n_frames), np.nan)
@@ -211,7 +253,7 @@ def run_lucky(iter_chunks: Callable[[], Iterable[tuple[int, np.ndarray]]], n_fra
             long_cog = np.zeros((n_det, n, n))
         sl = slice(start, start + len(frames))
         for i, detector in enumerate(detectors):
-            noisy = _noisy(frames, detector, seed, i, start)
+            noisy = _noisy(frames, detector, seed, start)
             centroids = centroid_px(noisy)
             frame_centroid[i, sl] = centroids
             frame_flux[i, sl] = noisy.sum(axis=(-2, -1), dtype=np.float64)
@@ -236,6 +278,7 @@ def run_lucky(iter_chunks: Callable[[], Iterable[tuple[int, np.ndarray]]], n_fra
 
     # pass 2: same noise, recentre, accumulate into (criterion, bin) partial sums
     partial = np.zeros((n_det, n_crit * n_bins, n * n))
+    partial_noiseless = np.zeros((n_det, n_crit * n_bins, n * n))
     around = n // 2 + np.arange(-3, 4)
     centre_window = (around[:, None] * n + around).ravel()  # 7 x 7 pixels around the axis
     frame_window = np.empty((n_det, n_frames, centre_window.size), dtype=np.float32)
@@ -244,8 +287,9 @@ def run_lucky(iter_chunks: Callable[[], Iterable[tuple[int, np.ndarray]]], n_fra
     for start, frames in _chunks(iter_chunks, n_frames):
         k = len(frames)
         sl = slice(start, start + k)
+        noiseless = None
         for i, detector in enumerate(detectors):
-            noisy = _noisy(frames, detector, seed, i, start)
+            noisy = _noisy(frames, detector, seed, start)
             if not np.array_equal(noisy.sum(axis=(-2, -1), dtype=np.float64), frame_flux[i, sl]):
                 raise RuntimeError(f"frames {start}.. differ between the two passes")
             flat = shift_frames(noisy, shifts[i, sl]).reshape(k, n * n)
@@ -254,7 +298,13 @@ def run_lucky(iter_chunks: Callable[[], Iterable[tuple[int, np.ndarray]]], n_fra
             kept = bins >= 0
             _, frame_index = np.nonzero(kept)
             one_hot[(rows + bins)[kept], frame_index] = 1.0
-            partial[i] += one_hot @ flat
+            summed = one_hot @ flat
+            partial[i] += summed
+            if not detector.noiseless:  # the noiseless frames, same shifts and bins
+                if noiseless is None:  # what a noiseless detector gives (apply_detector)
+                    noiseless = np.asarray(frames, dtype=np.float32)
+                summed = one_hot @ shift_frames(noiseless, shifts[i, sl]).reshape(k, n * n)
+            partial_noiseless[i] += summed
             long_cog[i] += flat.sum(axis=0, dtype=np.float64).reshape(n, n)
             frame_window[i, sl] = flat[:, centre_window]
         progress.update(sl.stop)
@@ -262,13 +312,12 @@ def run_lucky(iter_chunks: Callable[[], Iterable[tuple[int, np.ndarray]]], n_fra
                                             diffraction_limited_peak)
 
     # integrated images: cumulative sums of bins, scored
-    cumulative = np.cumsum(partial.reshape(n_det, n_crit, n_bins, n, n), axis=2)
-    images = cumulative[:, :, last_bin]  # (det, crit, fraction, n, n)
-    images = np.moveaxis(images, 0, 2)  # (crit, fraction, det, n, n)
+    scoring = (n, n_bins, last_bin, encircled, diffraction_limited_peak, pixel_scale_arcsec)
+    _, s_nl, fwhm_nl, d50_nl = _score(partial_noiseless, *scoring)
+    del partial_noiseless
+    images, s_int, fwhm_int, d50_int = _score(partial, *scoring)
+    del partial
     long_images = np.stack([long_none, long_cog])  # (recentring, det, n, n)
-    s_int = strehl(images, diffraction_limited_peak)
-    d50_int = 2 * encircled.radius_px(images) * pixel_scale_arcsec
-    fwhm_int = fwhm_arcsec(images, pixel_scale_arcsec)
     s_long = strehl(long_images, diffraction_limited_peak)
     d50_long = 2 * encircled.radius_px(long_images) * pixel_scale_arcsec
     fwhm_long = fwhm_arcsec(long_images, pixel_scale_arcsec)
@@ -276,6 +325,12 @@ def run_lucky(iter_chunks: Callable[[], Iterable[tuple[int, np.ndarray]]], n_fra
     ds = _dataset(detectors, criteria, criteria_external, fractions, counts, n_frames,
                   s_int, fwhm_int, d50_int, s_long, fwhm_long, d50_long,
                   frame_strehl, frame_d50_arcsec, frame_centroid, values)
+    same = "of the integrated image of the same selection and shifts applied to the noiseless frames"
+    sel = ("criterion", "fraction", "detector")
+    ds["strehl_noiseless"] = (sel, s_nl, _attrs("1", f"Strehl ratio {same}"))
+    ds["fwhm_arcsec_noiseless"] = (sel, fwhm_nl, _attrs("arcsec", f"FWHM {same}"))
+    ds["d50_arcsec_noiseless"] = (sel, d50_nl, _attrs(
+        "arcsec", f"diameter enclosing 50% of the energy {same}"))
     ds["frame_recentred_strehl"] = (("detector", "frame"), frame_recentred_strehl, _attrs(
         "1", "recentred frame's value at the recentred long exposure's peak pixel (within 3 pixels of the axis) "
              "over its flux and the diffraction-limited peak (their mean is that long exposure's Strehl)"))

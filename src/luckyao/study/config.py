@@ -13,6 +13,7 @@ import math
 from pathlib import Path
 
 import jsonschema
+import numpy as np
 import yaml
 
 SCHEMA_PATH = Path(__file__).with_name("config.schema.yaml")
@@ -169,6 +170,20 @@ def _check_figure(fig_id: str, figure: dict, cases: dict, config: dict) -> None:
     detector = figure.get("detector")
     if detector is not None and detector not in config["lucky"]["detectors"]:
         raise ConfigError(f"config key 'figures.{fig_id}.detector': unknown detector '{detector}'")
+    if figure["kind"] == "quality_vs_signal":
+        sweep = config["lucky"].get("detector_sweep")
+        if sweep is None:
+            raise ConfigError(f"config key 'figures.{fig_id}.kind': quality_vs_signal needs lucky.detector_sweep")
+        for key in ("criteria", "fractions", "read_noise_e", "metric"):
+            if key not in figure:
+                raise ConfigError(f"config key 'figures.{fig_id}.{key}': required for quality_vs_signal")
+        missing = set(figure["read_noise_e"]) - set(sweep["read_noise_e"])
+        if missing:
+            raise ConfigError(f"config key 'figures.{fig_id}.read_noise_e': {sorted(missing)} not in "
+                              "lucky.detector_sweep.read_noise_e")
+        missing = set(figure["fractions"]) - set(config["lucky"]["fractions"])
+        if missing:
+            raise ConfigError(f"config key 'figures.{fig_id}.fractions': {sorted(missing)} not in lucky.fractions")
 
 
 def criteria_of(case: dict) -> set[str]:
@@ -252,6 +267,27 @@ def commands_key(spec: dict) -> str:
     return "commands_" + sha256(spec)[:12]
 
 
+def sweep_detectors(lucky: dict) -> dict:
+    """The named detectors of ``lucky.detector_sweep`` (none without it): every read noise
+    x ``levels`` photon counts per frame, log-spaced from ``min`` to ``max``."""
+    sweep = lucky.get("detector_sweep")
+    if sweep is None:
+        return {}
+    grid = sweep["photons_per_frame"]
+    photons = np.geomspace(grid["min"], grid["max"], grid["levels"])
+    return {sweep_name(read_noise, n): {"photons_per_frame": float(n), "read_noise_e": float(read_noise)}
+            for read_noise in sweep["read_noise_e"] for n in photons}
+
+
+def sweep_name(read_noise_e: float, photons_per_frame: float) -> str:
+    return f"rn{read_noise_e:g}_{photons_per_frame:.3g}ph"
+
+
 def lucky_settings(study: dict, cases: dict, case_name: str) -> dict:
-    """The post-processing settings one case's lucky job uses, with its resolved config."""
-    return {"seed": study["seed"], "case": case_name, "case_config": cases[case_name], **study["lucky"]}
+    """The post-processing settings one case's lucky job uses, with its resolved config:
+    every listed detector, and the detector sweep when a ``quality_vs_signal`` figure
+    shows the case (the sweep's cost goes only where it is drawn)."""
+    lucky = {key: value for key, value in study["lucky"].items() if key != "detector_sweep"}
+    if any(f["kind"] == "quality_vs_signal" and case_name in f["cases"] for f in study["figures"].values()):
+        lucky["detectors"] = {**lucky["detectors"], **sweep_detectors(study["lucky"])}
+    return {"seed": study["seed"], "case": case_name, "case_config": cases[case_name], **lucky}

@@ -262,6 +262,78 @@ def draw_rms_truth(ds: xr.Dataset, title: str):
     return fig
 
 
+def quality_vs_signal_data(settings: dict, names, datasets) -> xr.Dataset:
+    """Integrated-image quality (on-axis target) vs detected photons per frame over the
+    detector sweep, per case, criterion, fraction and read noise; with the score of the
+    same selection and shifts on the noiseless frames, and the noiseless detector's."""
+    metric, criteria, fractions = settings["metric"], settings["criteria"], settings["fractions"]
+    read_noise = settings["read_noise_e"]
+    first = datasets[0]
+    sweep = settings["sweep_detectors"]  # name -> photons_per_frame, read_noise_e
+    signal = np.unique([d["photons_per_frame"] for d in sweep.values()])
+    names_at = [[next(name for name, d in sweep.items() if d["read_noise_e"] == r and d["photons_per_frame"] == n)
+                 for n in signal] for r in read_noise]  # (read noise, signal) detector names
+
+    def table(variable):
+        return np.array([[[[ds[variable].sel(criterion=c, fraction=f, detector=row).isel(target=0).values
+                            for row in names_at] for f in fractions] for c in criteria] for ds in datasets])
+
+    data = {metric: (("case", "criterion", "fraction", "read_noise", "signal"), table(metric),
+                     dict(first[metric].attrs))}
+    if f"{metric}_noiseless" in first:
+        data[f"{metric}_noiseless"] = (("case", "criterion", "fraction", "read_noise", "signal"),
+                                       table(f"{metric}_noiseless"), dict(first[f"{metric}_noiseless"].attrs))
+    noiseless = first.detector[np.isnan(first.photons_per_frame.values)].values
+    if noiseless.size:
+        reference = [[[ds[metric].sel(criterion=c, fraction=f, detector=noiseless[0]).isel(target=0).values
+                       for f in fractions] for c in criteria] for ds in datasets]
+        data[f"{metric}_noiseless_detector"] = (("case", "criterion", "fraction"), np.array(reference), {
+            **first[metric].attrs, "long_name": f"{first[metric].attrs['long_name']}, noiseless detector"})
+    return xr.Dataset(
+        data,
+        coords={**_case_coords(settings, names, datasets),
+                "criterion": ("criterion", criteria, {"long_name": "selection criterion"}),
+                "fraction": ("fraction", fractions, {"units": "1", "long_name": "fraction of frames selected"}),
+                "read_noise": ("read_noise", read_noise, {"units": "electron", "long_name": "read noise rms per pixel"}),
+                "signal": ("signal", signal, {"units": "photon", "long_name": "detected photons per lucky frame"})},
+        attrs={"metric": metric},
+    )
+
+
+def draw_quality_vs_signal(ds: xr.Dataset, title: str):
+    metric = ds.attrs["metric"]
+    n_rows, n_cols = ds.sizes["read_noise"], ds.sizes["fraction"]
+    fig, axes = plt.subplots(n_rows, n_cols, figsize=(4.3 * n_cols, 3.6 * n_rows + 0.9), squeeze=False,
+                             sharey=True, constrained_layout=True)
+    markers = "os^vD"
+    for r, read_noise in enumerate(ds.read_noise.values):
+        for f, fraction in enumerate(ds.fraction.values):
+            ax = axes[r, f]
+            for case in ds.case.values:
+                style = _style(ds, case)
+                for k, criterion in enumerate(ds.criterion.values):
+                    cell = ds.sel(case=case, criterion=criterion, fraction=fraction)
+                    label = f"{cell.label.values}, by {_CRITERIA.get(criterion, criterion)}"
+                    ax.plot(ds.signal, cell[metric].sel(read_noise=read_noise), marker=markers[k % 5], ms=3.5,
+                            label=label, **style)
+                    if f"{metric}_noiseless" in ds:  # the same selection and shifts on the noiseless frames
+                        ax.plot(ds.signal, cell[f"{metric}_noiseless"].sel(read_noise=read_noise), lw=0.8, ms=2.5,
+                                marker=markers[k % 5], color=style["color"], ls=":", alpha=0.8)
+                    if f"{metric}_noiseless_detector" in ds:
+                        ax.axhline(float(cell[f"{metric}_noiseless_detector"]), color=style["color"], lw=0.6, ls=":")
+            ax.set_xscale("log")
+            ax.set_xlabel("detected photons per frame")
+            ax.set_ylabel(_METRICS[metric])
+            ax.set_title(f"({chr(ord('a') + r)}) read noise {read_noise:g} e-, {100 * fraction:g} % of frames",
+                         loc="left", fontsize=9)
+            ax.grid(alpha=0.3)
+    fig.legend(*axes[0, 0].get_legend_handles_labels(), loc="outside lower center", ncol=2, fontsize=7,
+               title="markers: selection criterion; thin dotted with markers: the same selection and shifts on "
+                     "the noiseless frames; dotted line: noiseless detector", title_fontsize=7)
+    fig.suptitle(f"{title}: integrated-image {_METRICS[metric]} vs signal per frame")
+    return fig
+
+
 def _correlations(estimate: np.ndarray, truth: np.ndarray) -> tuple[float, float]:
     from scipy.stats import pearsonr, spearmanr
 
@@ -363,6 +435,7 @@ FIGURE_KINDS = {
     "quality_vs_fraction": (quality_vs_fraction_data, draw_quality_vs_fraction),
     "long_exposure_check": (long_exposure_check_data, draw_long_exposure_check),
     "long_exposure_table": (long_exposure_table_data, draw_long_exposure_table),
+    "quality_vs_signal": (quality_vs_signal_data, draw_quality_vs_signal),
     "residuals": (residuals_data, draw_residuals),
 }
 
