@@ -15,7 +15,7 @@ from ..lucky.detector import Detector
 from ..lucky.selection import ExternalCriterion, run_lucky
 from .case import Case
 from .config import canonical_json
-from .datasets import iter_frame_blocks, open_dataset, provenance, write_dataset
+from .datasets import iter_frame_blocks, open_dataset, provenance, require_finite, write_dataset
 
 log = logging.getLogger(__name__)
 
@@ -76,6 +76,13 @@ def lucky_case(settings: dict, frames_path, telemetry_path, out_path) -> None:
     ds.attrs["case"] = settings["case"]
     ds.attrs["lucky_settings_json"] = canonical_json({k: v for k, v in settings.items() if k != "case_config"})
     ds.attrs["telemetry_config_sha256"] = telemetry.attrs["config_sha256"]
-    # per-frame values may be NaN (a frame without detected flux); the results may not
-    write_dataset(ds, out_path, allow_nan={name for name in ds.data_vars if name.startswith("frame_")})
+    # A noisy image can have no positive flux (a few photons under read noise): its metrics
+    # are undefined (NaN), per frame or integrated. Nothing else may be NaN: every value of
+    # the noiseless detectors and every variable without a detector.
+    noisy = [str(d) for d, n in zip(ds.detector.values, ds.photons_per_frame.values) if np.isfinite(n)]
+    for name, var in ds.data_vars.items():
+        if var.dtype.kind == "f" and not name.startswith("frame_"):
+            strict = var.drop_sel(detector=noisy) if "detector" in var.dims else var
+            require_finite(strict.values, f"file '{out_path}'", name, strict.dims)
+    write_dataset(ds, out_path, allow_nan=set(ds.data_vars))
     log.info("wrote %s: %s", out_path, json.dumps({k: int(v) for k, v in ds.sizes.items()}))
