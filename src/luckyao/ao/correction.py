@@ -26,8 +26,8 @@ class OpenLoopCorrection:
     """Commands of every exposure and the DM surface at every step.
 
     ``command_matrix`` (n_act, n_slopes) [m / rad]; ``dm_slopes`` (n_slopes, n_act)
-    [rad / m]; ``influence`` (n_samples, n_act) [m / m]: the DM surface at the
-    science pupil samples (in the order the propagator packs them).
+    [rad / m]; ``surface``: commands [m] -> the DM surface [m] at the science pupil
+    samples (n_samples,), in the order the propagator packs them.
     ``lookahead_steps``: how far the sensing may run ahead of the science steps
     (a lucky frame's steps, when its exposures are all sensed first).
     """

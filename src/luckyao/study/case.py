@@ -19,6 +19,7 @@ from ..tomography.prior import TurbulencePrior
 from ..units import ARCSEC_RAD
 from ..wfs.beacons import LgsConfig
 from ..wfs.shack_hartmann import ShackHartmann
+from .config import frame_count
 
 
 @dataclass(frozen=True)
@@ -137,7 +138,7 @@ class Case:
             targets=targets_from(case["targets_arcsec"]),
             time_step_s=case["time_step_s"],
             steps_per_frame=round(cam["frame_time_s"] / case["time_step_s"]),
-            n_frames=int(np.floor(case["duration_s"] / cam["frame_time_s"] + 1e-9)),
+            n_frames=frame_count(case),
             lgs=lgs_from(case["lgs"]) if case["lgs"]["enabled"] else None,
             wfs=wfs_from(case["wfs"]),
             tomography=tomography_from(case["tomography"]),

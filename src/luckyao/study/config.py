@@ -131,7 +131,7 @@ def validate_study(config: dict, schema: dict | None = None) -> dict:
         try:
             _validate(resolved, case_schema, f"cases.{name}")
             _check_case(name, resolved, config["turbulence"])
-            n_frames = int(resolved["duration_s"] / resolved["camera"]["frame_time_s"] + 1e-9)
+            n_frames = frame_count(resolved)
             blocks = config["lucky"].get("error_blocks", 5)
             if n_frames < 2 * blocks:
                 raise ConfigError(f"config key 'lucky.error_blocks': {blocks} blocks need at least {2 * blocks} "
@@ -184,6 +184,11 @@ def _check_figure(fig_id: str, figure: dict, cases: dict, config: dict) -> None:
         missing = set(figure["fractions"]) - set(config["lucky"]["fractions"])
         if missing:
             raise ConfigError(f"config key 'figures.{fig_id}.fractions': {sorted(missing)} not in lucky.fractions")
+
+
+def frame_count(case: dict) -> int:
+    """Whole lucky frames in a resolved case's duration."""
+    return int(np.floor(case["duration_s"] / case["camera"]["frame_time_s"] + 1e-9))
 
 
 def criteria_of(case: dict) -> set[str]:
@@ -255,12 +260,10 @@ def reconstructor_key(spec: dict) -> str:
 
 def commands_spec(case: dict) -> dict | None:
     """Everything a case's AO command matrix depends on (None without AO): not the
-    delay, the targets or the atmosphere, so cases that differ only there share it."""
+    targets or the atmosphere, so cases that differ only there share it."""
     if case["ao"]["mode"] == "none":
         return None
-    unused = {"delay_steps", "glao_max_height_m" if case["ao"]["mode"] == "ltao" else "correction_direction_arcsec"}
-    ao = {key: value for key, value in case["ao"].items() if key not in unused}
-    return {"ao": ao, **{key: case[key] for key in ("telescope", "lgs", "wfs", "tomography")}}
+    return {key: case[key] for key in ("telescope", "lgs", "wfs", "tomography", "ao")}
 
 
 def commands_key(spec: dict) -> str:

@@ -59,13 +59,12 @@ def build_commands(spec: dict) -> xr.Dataset:
     lgs = lgs_from(spec["lgs"])
     wfs = wfs_from(spec["wfs"]).shack_hartmann(telescope, lgs)
     tomography = tomography_from(spec["tomography"])
-    ao = ao_from({"delay_steps": 0, "correction_direction_arcsec": (0.0, 0.0), "glao_max_height_m": 0.0,
-                  **spec["ao"]})
+    ao = ao_from(spec["ao"])
     dm = ao.deformable_mirror(telescope)
     geometry = SlopeGeometry.from_wfs(wfs, lgs)
     start = time.perf_counter()
     matrix = command_matrix(tomography.prior, geometry, tomography.noise_rms_rad, dm, ao.mode,
-                            ao.correction_direction_rad, spec["ao"].get("glao_max_height_m"))
+                            ao.correction_direction_rad, ao.glao_max_height_m)
     log.info("%s: %d actuators x %d slopes in %.1f s", ao.mode, dm.n_valid, geometry.n_slopes,
              time.perf_counter() - start)
     return xr.Dataset(

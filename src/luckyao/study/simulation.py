@@ -109,7 +109,7 @@ def simulate(case: Case, screens: ScreenSet, write_frames, sensor: LgsSensor | N
             buffer[:, j] = imager.to_pixels(intensity / spf)
             axis_strehl[:, frame] = buffer[:, j, n_pix // 2, n_pix // 2] / imager.diffraction_limited_peak
             true_rms_nm[:, frame] = phase_rad_to_nm(np.sqrt(rms2 / spf), REFERENCE_WAVELENGTH_M)
-            r0_frame[frame] = np.mean(case.r0.r0_m((frame * spf + np.arange(spf)) * case.time_step_s))
+            r0_frame[frame] = np.mean(case.r0.r0_m(steps * case.time_step_s))
         write_frames(start, buffer[:, :count])
         progress.update(start + count)
 
