@@ -38,14 +38,16 @@ case "$command" in
                 --directory=*) local_dir="${args[i]#--directory=}" ;;
             esac
         done
-        if ! pgrep -f "$VENV/bin/snakemake" > /dev/null; then
+        # (matched by this checkout's absolute path: another checkout's runs do not count)
+        snakemake="$PWD/$VENV/bin/snakemake"
+        if ! pgrep -f "$snakemake" > /dev/null; then
             if [ -n "$(ls -A "$local_dir/.snakemake/locks" 2> /dev/null)" ]; then
                 echo "luckyao: no Snakemake is running here; removing the stale lock of a killed run" >&2
-                "$VENV/bin/snakemake" --unlock -d "$local_dir" > /dev/null
+                "$snakemake" --unlock -d "$local_dir" > /dev/null
             fi
             find "$local_dir/results" -name '*.partial' -delete 2> /dev/null || true
         fi
-        exec "$VENV/bin/snakemake" "$@"
+        exec "$snakemake" "$@"
         ;;
     test)
         setup

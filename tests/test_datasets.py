@@ -29,7 +29,7 @@ def test_missing_and_corrupt_files_say_which_and_why(tmp_path):
 def test_a_failed_write_leaves_no_result(tmp_path):
     path = tmp_path / "frames.nc"
     with pytest.raises(RuntimeError):
-        with FrameWriter(path, 1, 4, 8, 0.1, {"title": "t"}) as writer:
+        with FrameWriter(path, [0], 4, 8, 0.1, {"title": "t"}) as writer:
             writer.write(0, np.ones((1, 2, 8, 8), np.float32))
             raise RuntimeError("simulation failed half way")
     assert list(tmp_path.iterdir()) == []
@@ -38,12 +38,18 @@ def test_a_failed_write_leaves_no_result(tmp_path):
 def test_frames_round_trip(tmp_path):
     path = tmp_path / "frames.nc"
     frames = np.random.default_rng(0).random((2, 5, 8, 8)).astype(np.float32)
-    with FrameWriter(path, 2, 5, 8, 0.1, {"title": "t"}) as writer:
+    with FrameWriter(path, [0, 1], 5, 8, 0.1, {"title": "t"}) as writer:
         writer.write(0, frames[:, :3])
         writer.write(3, frames[:, 3:])
     blocks = list(iter_frame_blocks(path, 1, block=2)())
     assert [start for start, _ in blocks] == [0, 2, 4]
     np.testing.assert_array_equal(np.concatenate([b for _, b in blocks]), frames[1])
+    star_only = tmp_path / "star.nc"  # a field case stores its star (here target 3) only
+    with FrameWriter(star_only, [3], 5, 8, 0.1, {"title": "t"}) as writer:
+        writer.write(0, frames[1:])
+    np.testing.assert_array_equal(next(iter_frame_blocks(star_only, 3, block=5)())[1], frames[1])
+    with pytest.raises(ValueError, match=r"holds targets \[3\], not target 0"):
+        next(iter_frame_blocks(star_only, 0)())
     ds = xr.Dataset({"v": ("x", np.arange(3.0), {"units": "1", "long_name": "v"})})
     write_dataset(ds, tmp_path / "v.nc")
     assert open_dataset(tmp_path / "v.nc", "v").v.values.tolist() == [0.0, 1.0, 2.0]

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from luckyao.lucky.detector import Detector, apply_detector
+from luckyao.lucky.detector import Detector, apply_detector, detect
 
 
 def two_level_frames(k, n=64):
@@ -20,6 +20,22 @@ NOISE_CASES = [(8000.0, 0.0), (8000.0, 0.1), (8000.0, 1.0), (400.0, 1.0), (200.0
                (200.0, 0.1), (100.0, 1.0)]
 
 
+def _assert_poisson_plus_gaussian(electrons, frames, bright, photons, read_noise_e):
+    """Per region of equal mean ``lam``: mean ``lam``, variance ``lam + sigma^2`` and third
+    central moment ``lam`` (the Gaussian adds none), each within 5 standard errors (the
+    third's from the sixth central moment, ~15 v^3 + lam)."""
+    assert electrons.dtype == np.float32 and electrons.shape == frames.shape
+    for region in (bright, ~bright):
+        lam = photons * float(frames[0][region][0])
+        values = electrons[:, region].astype(np.float64).ravel()
+        m = values.size
+        v = lam + read_noise_e**2
+        centred = values - values.mean()
+        assert values.mean() == pytest.approx(lam, abs=5 * np.sqrt(v / m))
+        assert np.mean(centred**2) == pytest.approx(v, abs=5 * np.sqrt((lam + 2 * v**2) / m))
+        assert np.mean(centred**3) == pytest.approx(lam, abs=5 * np.sqrt((15 * v**3 + lam) / m))
+
+
 @pytest.mark.parametrize("photons, read_noise_e", NOISE_CASES)
 def test_mean_variance_and_skewness_match_poisson_plus_gaussian(photons, read_noise_e):
     """Per pixel: mean N I, variance N I + sigma^2, third central moment N I (Poisson only).
@@ -32,16 +48,7 @@ def test_mean_variance_and_skewness_match_poisson_plus_gaussian(photons, read_no
     frames, bright = two_level_frames(300)
     detector = Detector("test", photons, read_noise_e)
     electrons = apply_detector(frames, detector, np.random.default_rng(7))
-    assert electrons.dtype == np.float32 and electrons.shape == frames.shape
-    for region in (bright, ~bright):
-        lam = photons * float(frames[0][region][0])
-        values = electrons[:, region].astype(np.float64).ravel()
-        m = values.size
-        v = lam + read_noise_e**2
-        centred = values - values.mean()
-        assert values.mean() == pytest.approx(lam, abs=5 * np.sqrt(v / m))
-        assert np.mean(centred**2) == pytest.approx(v, abs=5 * np.sqrt((lam + 2 * v**2) / m))
-        assert np.mean(centred**3) == pytest.approx(lam, abs=5 * np.sqrt(15 * v**3 / m))
+    _assert_poisson_plus_gaussian(electrons, frames, bright, photons, read_noise_e)
 
 
 @pytest.mark.parametrize("photons, read_noise_e", [(100.0, 0.0), (100.0, 0.1), (8000.0, 0.0),
@@ -95,3 +102,78 @@ def test_noisy_does_not_mutate_and_is_reproducible():
 def test_invalid_detectors_raise(kwargs):
     with pytest.raises(ValueError):
         Detector("bad", **kwargs)
+
+
+# The keyed streams of run_lucky (KeyedNoise / detect): same model, own sampler. 64 x 64
+# pixels: below n^2 / 10 = 410 expected photons a frame's photons are placed by search,
+# above it pixel by pixel (own draws from a mean of 1, PTRS from 10, arrivals below 1).
+KEYED_CASES = [(100.0, 0.0), (200.0, 1.0), (2000.0, 0.1), (8000.0, 0.0), (8000.0, 1.0), (1e5, 0.1)]
+
+
+@pytest.mark.parametrize("photons, read_noise_e", KEYED_CASES)
+def test_keyed_noise_mean_variance_and_skewness_match_poisson_plus_gaussian(photons, read_noise_e):
+    """As for apply_detector, for the keyed sampler; the third moment's tolerance also holds
+    for small means without read noise (sixth central moment ~lam, not ~15 v^3)."""
+    frames, bright = two_level_frames(300)
+    electrons = detect(frames, Detector("test", photons, read_noise_e), seed=7)
+    _assert_poisson_plus_gaussian(electrons, frames, bright, photons, read_noise_e)
+
+
+@pytest.mark.parametrize("photons", [100.0, 8000.0])
+def test_keyed_frame_totals_are_poisson(photons):
+    """Independent pixels: the frame total has variance N (2000 frames, tolerance 5 standard
+    errors of the variance, as above); neighbouring pixels and consecutive frames are
+    uncorrelated (|r| < 5 / sqrt(samples))."""
+    frames, _ = two_level_frames(2000, 64)
+    electrons = detect(frames, Detector("t", photons), seed=9).astype(np.float64)
+    totals = electrons.sum(axis=(-2, -1))
+    assert totals.mean() == pytest.approx(photons, abs=5 * np.sqrt(photons / 2000))
+    assert totals.var() == pytest.approx(photons, rel=5 * np.sqrt(2 / 2000))
+    centred = electrons - electrons.mean(axis=0)
+    for a, b in ((centred[:, :, :-1], centred[:, :, 1:]), (centred[:-1], centred[1:])):
+        r = np.mean(a * b) / np.sqrt(np.mean(a**2) * np.mean(b**2))
+        assert abs(r) < 5 / np.sqrt(a.size)
+
+
+def test_keyed_read_noise_is_standard_normal():
+    """4M deviates of the ziggurat (no photons: 1e-9 expected per frame): Kolmogorov-Smirnov
+    against the normal distribution (p > 1e-3), and the tail beyond the ziggurat's base
+    (|z| > 3.654) and beyond 4.5 as often as theory says (5 standard errors)."""
+    from scipy import stats
+    frames = np.full((1000, 64, 64), 1 / 4096, dtype=np.float32)
+    z = detect(frames, Detector("rn", 1e-9, 1.0), seed=3).astype(np.float64).ravel()
+    assert stats.kstest(z, "norm").pvalue > 1e-3
+    for edge in (3.6541528853610088, 4.5):
+        p = 2 * stats.norm.sf(edge)
+        assert np.mean(np.abs(z) > edge) == pytest.approx(p, abs=5 * np.sqrt(p / z.size))
+    assert abs(z.mean()) < 5 / np.sqrt(z.size) and z.var() == pytest.approx(1, abs=5 * np.sqrt(2 / z.size))
+
+
+def test_keyed_streams_depend_on_seed_name_and_frame_only():
+    """A frame's draws are keyed by (seed, name, frame index): any chunking gives the same
+    frames; another seed, name or frame index gives others; the input is not modified."""
+    frames, _ = two_level_frames(10, 64)
+    frames = frames.copy()
+    before = frames.copy()
+    detector = Detector("emccd", 500.0, 0.1)
+    whole = detect(frames, detector, seed=5)
+    np.testing.assert_array_equal(frames, before)
+    np.testing.assert_array_equal(np.concatenate([detect(frames[:3], detector, 5),
+                                                  detect(frames[3:], detector, 5, first_frame=3)]), whole)
+    assert not np.array_equal(detect(frames, detector, 6), whole)
+    assert not np.array_equal(detect(frames, Detector("emccd2", 500.0, 0.1), 5), whole)
+    assert not np.array_equal(whole[0], whole[1])  # same unit frame, another key
+
+
+def test_keyed_photons_never_land_on_dark_pixels():
+    """Pixels of zero (or negative: clipped) intensity get no photon in either way."""
+    frames = np.zeros((50, 64, 64), dtype=np.float32)
+    frames[:, 10:20, 30:33] = 1.0
+    frames[:, 40, 40] = -1.0
+    frames /= 30
+    for photons in (50.0, 1e5):
+        electrons = detect(frames, Detector("pc", photons), seed=1)
+        dark = np.ones((64, 64), bool)
+        dark[10:20, 30:33] = False
+        assert not electrons[:, dark].any()
+        assert electrons.sum() == pytest.approx(50 * photons, abs=5 * np.sqrt(50 * photons))

@@ -74,7 +74,7 @@ def test_the_centroid_of_a_nan_image_is_nan_not_zero():
 def test_a_non_finite_frame_is_never_written(tmp_path):
     path = tmp_path / "frames.nc"
     with pytest.raises(ValueError, match=r"frames file .*'frames'.*frame=1"):
-        with FrameWriter(path, 1, 4, 8, 0.1, {}) as writer:
+        with FrameWriter(path, [0], 4, 8, 0.1, {}) as writer:
             block = np.ones((1, 2, 8, 8), dtype=np.float32)
             block[0, 1, 3, 3] = np.inf
             writer.write(0, block)

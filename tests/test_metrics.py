@@ -4,7 +4,14 @@ import numpy as np
 import pytest
 from scipy import integrate, optimize, special
 
-from luckyao.lucky.metrics import EncircledEnergy, centroid_px, d50_arcsec, fwhm_arcsec, strehl
+from luckyao.lucky.metrics import (
+    EncircledEnergy,
+    centroid_px,
+    d50_arcsec,
+    fwhm_arcsec,
+    interpolant_patch,
+    strehl,
+)
 from luckyao.optics.imaging import Camera, Imager
 from luckyao.optics.pupil import Telescope, TiltRemover
 from luckyao.units import ARCSEC_RAD
@@ -182,3 +189,70 @@ def test_tilt_removed_rms_is_the_rms_of_the_least_squares_residual():
         expected = 3.0 * np.std(r2)
         assert remover.rms(phase[None])[0] == pytest.approx(expected, rel=1e-5)
     assert remover.rms((5.0 - 7.0 * x + 3.0 * y).astype(np.float32)) == pytest.approx(0.0, abs=1e-3)
+
+
+def test_binned_encircled_energy_is_the_same_sum():
+    """fractions_binned groups the terms of equal |f| (one kernel value each, float64): the
+    same sum as fractions (float32 matrix product) to float32 rounding, on Gaussians and on
+    noisy images; its d50 meets the Gaussian's theory (as test_gaussian_d50_and_fwhm)."""
+    ee = EncircledEnergy(64)
+    centres = np.array([[32.0, 32.0], [30.37, 33.81], [34.5, 29.5]])
+    images = gaussian_images(64, centres, 1.2)
+    noisy = (np.random.default_rng(4).poisson(500 * images) + np.random.default_rng(5).normal(
+        0, 1, images.shape)).astype(np.float32)
+    for frames in (images, noisy):
+        c = centroid_px(frames)
+        np.testing.assert_allclose(ee.fractions_binned(frames, c), ee.fractions(frames, c), atol=2e-5)
+    theory_px = 2 * 1.2 * np.sqrt(2 * np.log(2))
+    np.testing.assert_allclose(2 * ee.radius_px_binned(images, centroid_px(images)), theory_px, rtol=3e-3)
+    np.testing.assert_allclose(ee.radius_px_binned(images, centroid_px(images)), ee.radius_px(images), rtol=1e-5)
+
+
+@pytest.mark.parametrize("shape, up", [((32, 32), 4), ((33, 31), 3), ((16, 21), 5), ((64, 48), 16), ((7, 8), 2)])
+def test_interpolant_patch_is_the_matrix_fourier_transform(shape, up):
+    """The Dirichlet-kernel form of the trigonometric interpolant (two real products, the
+    Nyquist terms' rank-one part apart) equals the matrix Fourier transform of the DFT
+    (numpy's frequencies, -n/2 kept for even n) to rounding, on and off whole pixels,
+    outside the frame too (periodic)."""
+    ny, nx = shape
+    image = np.random.default_rng(1).standard_normal(shape) + 3.0
+    jy = np.arange(-2 * up, (ny + 3) * up)
+    jx = np.arange(-up - 1, (nx + 2) * up)
+    ky, kx = np.fft.fftfreq(ny) * ny, np.fft.fftfreq(nx) * nx
+    ey = np.exp(2j * np.pi * np.outer(jy / up, ky) / ny)
+    ex = np.exp(2j * np.pi * np.outer(kx, jx / up) / nx)
+    expected = (ey @ (np.fft.fft2(image) / image.size) @ ex).real
+    patch = interpolant_patch(image, jy, jx, up)
+    np.testing.assert_allclose(patch, expected, rtol=0, atol=1e-13 * np.abs(expected).max())
+    whole = patch[2 * up::up, up + 1::up][:ny, :nx]  # (y, x) = whole pixels 0.., 0..
+    np.testing.assert_allclose(whole, image, rtol=0, atol=1e-13 * np.abs(image).max())
+
+
+def test_fwhm_of_batches_is_per_image():
+    """fwhm_arcsec of a stack is that of each image alone (no state carried between images)."""
+    images = gaussian_images(64, [[32.0, 32.0], [30.37, 33.81], [34.5, 29.5]], 1.7).reshape(3, 1, 64, 64)
+    together = fwhm_arcsec(images, 0.5)
+    assert together.shape == (3, 1)
+    np.testing.assert_array_equal(together[:, 0], [fwhm_arcsec(image[0], 0.5) for image in images])
+
+
+def test_component_and_dilation_kernels_match_scipy():
+    """The compiled connected component (4-connected, as scipy.ndimage.label's default) and
+    3 x 3 dilation used by fwhm_arcsec give scipy.ndimage's masks."""
+    from scipy import ndimage
+
+    from luckyao.lucky.kernels import component, dilate
+    rng = np.random.default_rng(3)
+    for _ in range(20):
+        values = ndimage.uniform_filter(rng.random((40, 37)), 3)
+        seed = np.unravel_index(np.argmax(values), values.shape)
+        threshold = np.quantile(values, 0.6)
+        labels, _ = ndimage.label(values >= threshold)
+        expected = labels == labels[seed]
+        inside, near = np.empty(values.shape, bool), np.empty(values.shape, bool)
+        count, r0, r1, c0, c1 = component(values, threshold, *seed, inside)
+        rows, cols = np.nonzero(expected)
+        np.testing.assert_array_equal(inside, expected)
+        assert (count, r0, r1, c0, c1) == (expected.sum(), rows.min(), rows.max(), cols.min(), cols.max())
+        dilate(inside, near)
+        np.testing.assert_array_equal(near, ndimage.binary_dilation(expected, structure=np.ones((3, 3), bool)))

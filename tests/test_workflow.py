@@ -62,7 +62,7 @@ def finished_run(tmp_path_factory):
 
 def test_tiny_study_makes_every_figure_with_provenance(finished_run):
     workdir, _ = finished_run
-    for fig in ("quality", "longexp", "lgsrms", "residuals", "table", "noise"):
+    for fig in ("quality", "longexp", "lgsrms", "residuals", "table", "noise", "onaxis", "paired"):
         for ext in ("pdf", "png", "nc"):
             assert (workdir / "figures" / f"{fig}.{ext}").stat().st_size > 0
     lucky = xr.open_dataset(workdir / "results" / "cases" / "good" / "lucky.nc")
@@ -80,6 +80,46 @@ def test_tiny_study_makes_every_figure_with_provenance(finished_run):
     assert list(longexp.case.values) == ["good", "bad"]
     assert list(longexp.r0_cm.values) == pytest.approx([20.0, 10.0])
     assert {"simulated", "analytic"} <= set(longexp.data_vars)
+
+
+def test_a_field_star_selecting_itself_is_the_single_target_case(finished_run):
+    """The field case's on-axis star (target 0, its own reference) gives exactly the
+    single-target case's results; the off-axis targets, replayed rather than stored,
+    get results too."""
+    workdir, _ = finished_run
+    single = xr.open_dataset(workdir / "results" / "cases" / "ltao" / "lucky.nc")
+    field = xr.open_dataset(workdir / "results" / "cases" / "field" / "lucky.nc")
+    assert field.sizes["target"] == 3 and int(field.reference_target) == 0
+    compared = 0
+    for name, var in single.data_vars.items():
+        if "target" in var.dims and name in field:
+            np.testing.assert_array_equal(field[name].isel(target=0).values, var.isel(target=0).values,
+                                          err_msg=name)
+            compared += 1
+    assert compared >= 15
+    assert np.isfinite(field.strehl.sel(detector="noiseless").values).all()
+    onaxis = xr.open_dataset(workdir / "figures" / "onaxis.nc")
+    assert list(onaxis.distance.values) == [0.0, 10.0, 20.0]
+
+
+def test_every_quality_value_carries_its_error_and_paired_differences_are_tighter(finished_run):
+    """Each lucky value has a Monte-Carlo error from time blocks, carried into the figures'
+    data. Turning the four-LGS asterism by 90 degrees gives the same asterism (beacons
+    relabelled): its difference from the unturned case cannot matter, so the paired
+    error (per-block differences over the shared turbulence) covers it and is far
+    below the unpaired one."""
+    workdir, _ = finished_run
+    lucky = xr.open_dataset(workdir / "results" / "cases" / "ltao" / "lucky.nc")
+    for metric in ("strehl", "fwhm_arcsec", "d50_arcsec"):
+        assert lucky[f"{metric}_block"].sizes["block"] == 4
+        error = lucky[f"{metric}_error"].sel(detector="noiseless").values
+        assert np.isfinite(error).all() and (error > 0).any()
+    quality = xr.open_dataset(workdir / "figures" / "quality.nc")
+    assert "strehl_error" in quality and "d50_arcsec_error" in quality
+    paired = xr.open_dataset(workdir / "figures" / "paired.nc").sel(pair="turned asterism")
+    difference, error, unpaired = (paired[v].values for v in ("strehl", "strehl_error", "strehl_unpaired_error"))
+    assert (np.abs(difference) <= 2 * error + 1e-6).all(), (difference, error)
+    assert (error < 0.2 * unpaired).all(), (error, unpaired)
 
 
 def test_nothing_to_do_after_a_run(finished_run):

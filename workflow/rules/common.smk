@@ -3,9 +3,9 @@ import re
 import sys
 
 from luckyao.study.code_deps import step_sources
-from luckyao.study.config import (ConfigError, canonical_json, commands_key, commands_spec, lucky_settings,
-                                  reconstructor_key, reconstructor_spec, sweep_detectors, turbulence_key,
-                                  turbulence_spec, validate_study)
+from luckyao.study.config import (ConfigError, canonical_json, commands_key, commands_spec, imaged_targets,
+                                  lucky_settings, reconstructor_key, reconstructor_spec, sweep_detectors,
+                                  turbulence_key, turbulence_spec, validate_study)
 
 try:
     CASES = validate_study(config)
@@ -44,3 +44,43 @@ wildcard_constraints:
     rkey="reconstructor_[0-9a-f]{12}",
     ckey="commands_[0-9a-f]{12}",
     fig="|".join(re.escape(f) for f in STUDY["figures"]),
+
+
+def figure_settings(fig):
+    """The figure's config, its cases' resolved configs, the seed, and the detector sweep."""
+    figure = STUDY["figures"][fig]
+    sweep = {"sweep_detectors": sweep_detectors(STUDY["lucky"])} if figure["kind"] == "quality_vs_signal" else {}
+    return {**figure, "seed": STUDY["seed"], "case_configs": {c: CASES[c] for c in figure["cases"]}, **sweep}
+
+
+def figure_inputs(fig):
+    """The cases' lucky datasets; none for the geometry-only asterism figure."""
+    figure = STUDY["figures"][fig]
+    if figure["kind"] == "asterism":
+        return []
+    return [f"results/cases/{c}/lucky.nc" for c in figure["cases"]]
+
+
+def figure_report_labels(fig, data):
+    """The report's labels of a figure: what it is, and the provenance its dataset carries."""
+    import xarray as xr
+
+    with xr.open_dataset(data) as ds:
+        attrs = dict(ds.attrs)
+    figure = STUDY["figures"][fig]
+    return {
+        "figure": fig,
+        "kind": figure["kind"],
+        "cases": ", ".join(figure["cases"]),
+        "config sha256": str(attrs.get("config_sha256", "?")),
+        "code version": str(attrs.get("code_version", "?")),
+    }
+
+
+def replay_screens(case):
+    """The screens (and metadata) when the case's lucky job replays targets its simulation
+    did not image (a field with a reference star), else none."""
+    if len(imaged_targets(CASES[case])) == len(CASES[case]["targets_arcsec"]):
+        return []
+    key = turbulence_key(TURBULENCE[case])
+    return [f"results/turbulence/{key}.npy", f"results/turbulence/{key}.nc"]

@@ -3,15 +3,23 @@ rule lucky:
     input:
         frames="results/cases/{case}/frames.nc",
         telemetry="results/cases/{case}/telemetry.nc",
+        replay=lambda w: replay_screens(w.case),
         code=step_sources("postprocess"),
     output:
         "results/cases/{case}/lucky.nc",
     params:
         settings=lambda w: canonical_json(lucky_settings(STUDY, CASES, w.case)),
+        replay=lambda w, input: f"--screens {input.replay[0]} --screens-metadata {input.replay[1]}" if input.replay else "",
+    threads: 1
+    priority: 10  # a finished simulation's frame cube is post-processed (and, if temporary, deleted) first
+    resources:
+        mem_mb=3000,  # paper fidelity: 2 GB measured
+        runtime=30,  # minutes; paper fidelity: up to 15 measured
     log:
         "logs/lucky/{case}.log",
     benchmark:
         "results/benchmarks/lucky/{case}.tsv"
     shell:
         "{LUCKYAO} lucky --settings {params.settings:q} --frames {input.frames}"
-        " --telemetry {input.telemetry} --out {output} 2> {log}"
+        " --telemetry {input.telemetry} --out {output} {params.replay} 2> {log}"
+

@@ -6,6 +6,10 @@ rule reconstructor:
         "results/reconstructors/{rkey}.nc",
     params:
         spec=lambda w: canonical_json(RECONSTRUCTOR_BY_KEY[w.rkey]),
+    threads: 1
+    resources:
+        mem_mb=1500,  # at most 1.1 GB measured
+        runtime=5,  # minutes; at most 1 measured
     log:
         "logs/reconstructor/{rkey}.log",
     benchmark:
@@ -22,6 +26,10 @@ rule commands:
         "results/commands/{ckey}.nc",
     params:
         spec=lambda w: canonical_json(COMMANDS_BY_KEY[w.ckey]),
+    threads: 1
+    resources:
+        mem_mb=1500,  # at most 1.1 GB measured (32x32 WFS)
+        runtime=5,  # minutes; at most 1 measured
     log:
         "logs/commands/{ckey}.log",
     benchmark:

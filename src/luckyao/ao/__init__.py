@@ -3,5 +3,5 @@ correction applied in the time loop (LTAO, GLAO; tip-tilt left alone).
 
 Public objects, by module --
 dm: DeformableMirror; control: command_matrix, dm_slopes_matrix, ground_layers;
-correction: OpenLoopCorrection.
+correction: OpenLoopCorrection, DelayedDm.
 """

@@ -22,36 +22,33 @@ from ..units import REFERENCE_WAVELENGTH_M
 from .dm import GridSurface
 
 
-class OpenLoopCorrection:
-    """Commands of every exposure and the DM surface at every step.
+class DelayedDm:
+    """The DM of the time loop: each exposure's commands and the surface they make,
+    applied ``delay_steps`` after the exposure starts, until the next exposure's.
 
-    ``command_matrix`` (n_act, n_slopes) [m / rad]; ``dm_slopes`` (n_slopes, n_act)
-    [rad / m]; ``surface``: commands [m] -> the DM surface [m] at the science pupil
-    samples (n_samples,), in the order the propagator packs them.
-    ``lookahead_steps``: how far the sensing may run ahead of the science steps
-    (a lucky frame's steps, when its exposures are all sensed first).
+    ``surface``: commands [m] -> the DM surface [m] at the science pupil samples
+    (n_samples,), in the order the propagator packs them. ``lookahead_steps``: how
+    far commands may arrive ahead of the science steps (a lucky frame's steps, when
+    its exposures are all sensed first). Fed by :class:`OpenLoopCorrection` in the
+    time loop, or directly with recorded commands when the science path is replayed.
     """
 
-    def __init__(self, command_matrix: np.ndarray, dm_slopes: np.ndarray, surface: GridSurface,
-                 exposure_steps: int, delay_steps: int, lookahead_steps: int):
+    def __init__(self, surface: GridSurface, exposure_steps: int, delay_steps: int, lookahead_steps: int):
         if delay_steps < exposure_steps:
             raise ValueError(f"a command cannot be applied before its exposure ends: delay_steps "
                              f"{delay_steps} < exposure_steps {exposure_steps}")
-        if command_matrix.shape[0] != int(surface.valid.sum()) or dm_slopes.shape != command_matrix.shape[::-1]:
-            raise ValueError("the command matrix does not match this DM or WFS: rebuild it")
-        self.command_matrix = np.asarray(command_matrix, dtype=np.float32)
-        self.dm_slopes = np.asarray(dm_slopes, dtype=np.float32)
         self.surface = surface
         self.exposure_steps, self.delay_steps, self.lookahead_steps = exposure_steps, delay_steps, lookahead_steps
+        self.n_actuators = int(surface.valid.sum())
         self._commands = {}  # exposure start step -> commands (n_act,) float32 [m]
         self._surfaces = {}  # exposure start step -> DM surface (n_samples,) float32 [rad at 500 nm]
-        self._flat_commands = np.zeros(command_matrix.shape[0], dtype=np.float32)
+        self._flat_commands = np.zeros(self.n_actuators, dtype=np.float32)
         self._flat_surface = np.zeros(surface.samples.size, dtype=np.float32)
 
-    def measure(self, start_step: int, slopes: np.ndarray) -> None:
-        """The commands of the exposure starting at ``start_step`` from its tilt-removed
-        slopes (n_beacons, 2, n_valid) [rad]; commands no longer needed are dropped."""
-        commands = self.command_matrix @ np.asarray(slopes, dtype=np.float32).ravel()
+    def apply(self, start_step: int, commands: np.ndarray) -> None:
+        """The commands (n_act,) [m] of the exposure starting at ``start_step``; commands no
+        longer needed are dropped."""
+        commands = np.asarray(commands, dtype=np.float32)
         self._commands[start_step] = commands
         # in rad at the reference wavelength, that of the stored phases
         self._surfaces[start_step] = (self.surface(commands) * (2 * np.pi / REFERENCE_WAVELENGTH_M)).astype(np.float32)
@@ -73,8 +70,35 @@ class OpenLoopCorrection:
         source = self._source(step)
         return self._surfaces[source] if source >= 0 else self._flat_surface
 
+
+class OpenLoopCorrection:
+    """LGS slopes -> each exposure's commands -> the :class:`DelayedDm`.
+
+    ``command_matrix`` (n_act, n_slopes) [m / rad]; ``dm_slopes`` (n_slopes, n_act)
+    [rad / m]; the other arguments are the :class:`DelayedDm`'s.
+    """
+
+    def __init__(self, command_matrix: np.ndarray, dm_slopes: np.ndarray, surface: GridSurface,
+                 exposure_steps: int, delay_steps: int, lookahead_steps: int):
+        self.dm = DelayedDm(surface, exposure_steps, delay_steps, lookahead_steps)
+        if command_matrix.shape[0] != self.dm.n_actuators or dm_slopes.shape != command_matrix.shape[::-1]:
+            raise ValueError("the command matrix does not match this DM or WFS: rebuild it")
+        self.command_matrix = np.asarray(command_matrix, dtype=np.float32)
+        self.dm_slopes = np.asarray(dm_slopes, dtype=np.float32)
+
+    def measure(self, start_step: int, slopes: np.ndarray) -> np.ndarray:
+        """The commands (n_act,) float32 [m] of the exposure starting at ``start_step`` from
+        its tilt-removed slopes (n_beacons, 2, n_valid) [rad], handed to the DM."""
+        commands = self.command_matrix @ np.asarray(slopes, dtype=np.float32).ravel()
+        self.dm.apply(start_step, commands)
+        return commands
+
+    def surface_at(self, step: int) -> np.ndarray:
+        """DM surface (n_samples,) [rad at 500 nm] at the science pupil samples at ``step``."""
+        return self.dm.surface_at(step)
+
     def residual_slopes(self, start_step: int, slopes: np.ndarray) -> np.ndarray:
         """Pseudo-closed-loop slopes of the exposure starting at ``start_step``: its
         open-loop slopes less the DM's, for the mean command applied during it."""
-        applied = np.mean([self.commands_at(start_step + i) for i in range(self.exposure_steps)], axis=0)
+        applied = np.mean([self.dm.commands_at(start_step + i) for i in range(self.dm.exposure_steps)], axis=0)
         return slopes - (self.dm_slopes @ applied).reshape(slopes.shape)

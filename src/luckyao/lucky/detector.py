@@ -4,11 +4,18 @@ As in the study (Basden 2014): the signal is given as detected photons per frame
 there is no quantum efficiency, no EMCCD excess noise factor, no bias and no gain; a
 pixel reads ``Poisson(N I) + Normal(0, sigma_read)`` electrons, ``I`` the unit-flux
 image and ``N`` the photons per frame.
+
+Two samplers of that model: :func:`apply_detector` draws from a numpy ``Generator``;
+:class:`KeyedNoise` (:func:`detect`), used by lucky imaging, from compiled streams keyed
+per frame by (seed, detector name, frame index) (:mod:`luckyao.lucky.kernels`).
 """
 
+import zlib
 from dataclasses import dataclass
 
 import numpy as np
+
+from . import kernels
 
 
 @dataclass(frozen=True)
@@ -96,3 +103,73 @@ def _poisson_by_photons(frames: np.ndarray, photons: float,
     pixel = np.searchsorted(cdf.ravel(), position, side="right")
     counts = np.bincount(pixel, minlength=k * m)
     return counts.astype(np.float32).reshape(shape)
+
+
+def detector_key(name: str) -> int:
+    """Stable integer of a detector's name that keys its noise: ``zlib.crc32`` of its UTF-8.
+
+    Not Python's ``hash`` (salted per process), so draws are reproducible across runs.
+    """
+    return zlib.crc32(name.encode("utf-8"))
+
+
+class KeyedNoise:
+    """Detector noise of frame chunks with one random stream per (seed, detector, frame).
+
+    The same model as :func:`apply_detector` (``Poisson(N I) + sigma Normal(0, 1)``, negative
+    unit-flux values as 0), drawn by :func:`luckyao.lucky.kernels.detect_frames`: frame
+    ``f``'s draws are keyed by ``(seed, detector_key(name), f)`` only, so they do not
+    depend on the chunking, the other frames or the other detectors, and drawing a chunk
+    again gives the same frames. :meth:`prepare` a chunk once (sums shared by all
+    detectors), then :meth:`detect` it for each detector.
+    """
+
+    def __init__(self, n_pixels: int, max_frames: int):
+        n = n_pixels
+        self.max_frames = max_frames
+        self._within = np.empty((max_frames, n, n))
+        self._rows_cumulative = np.empty((max_frames, n))
+        self._bits = np.empty(n * n // 2 + kernels.LANES * 4, np.uint64)[: n * n // 2]
+        self._normals = np.empty(n * n, np.float32)
+        self._unit = None
+
+    def prepare(self, frames_unit_flux: np.ndarray) -> None:
+        """Take the chunk's unit-flux frames (k, n, n) (float32, as given or converted)."""
+        unit = np.ascontiguousarray(frames_unit_flux, dtype=np.float32)
+        k, n, _ = unit.shape
+        if n * n % 64 or k > len(self._within):
+            raise ValueError(f"chunk {unit.shape}: n^2 must be a multiple of 64, at most "
+                             f"{len(self._within)} frames")
+        kernels.cumulative(unit, self._within[:k], self._rows_cumulative[:k])
+        self._unit = unit
+
+    def detect(self, detector: Detector, seed: int, first_frame: int,
+               out: np.ndarray | None = None) -> tuple[np.ndarray, ...]:
+        """The prepared chunk's detected frames [electron] (k, n, n) float32 (``out`` if
+        given), frames ``first_frame..``, with their row and column sums (k, n) float64
+        and peak (k,) float32. A noisy detector only."""
+        if detector.noiseless:
+            raise ValueError("a noiseless detector draws nothing")
+        unit = self._unit
+        k, n, _ = unit.shape
+        out = np.empty(unit.shape, np.float32) if out is None else out[:k]
+        if out.shape != unit.shape or out.dtype != np.float32 or not out.flags.c_contiguous:
+            raise ValueError(f"out must be C-contiguous float32 of at least {unit.shape}")
+        rows, cols, peak = np.empty((k, n)), np.empty((k, n)), np.empty(k, np.float32)
+        kernels.detect_frames(unit, self._within[:k], self._rows_cumulative[:k],
+                              float(detector.photons_per_frame), np.float32(detector.read_noise_e),
+                              seed, detector_key(detector.name), first_frame, out, rows, cols, peak,
+                              self._bits, self._normals)
+        return out, rows, cols, peak
+
+
+def detect(frames_unit_flux: np.ndarray, detector: Detector, seed: int,
+           first_frame: int = 0) -> np.ndarray:
+    """Detected frames (float32) of frames ``first_frame..`` (k, n, n) with the keyed
+    streams of :class:`KeyedNoise` (a float32 copy for a noiseless detector)."""
+    frames = np.asarray(frames_unit_flux)
+    if detector.noiseless:
+        return np.array(frames, dtype=np.float32, copy=True)
+    noise = KeyedNoise(frames.shape[-1], len(frames))
+    noise.prepare(frames)
+    return noise.detect(detector, seed, first_frame)[0]

@@ -12,7 +12,6 @@ the optical axis on pixel ``(n/2, n/2)``; detector noise (:mod:`luckyao.lucky.de
 is applied here, so one simulated cube serves every detector model.
 """
 
-import zlib
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass
 
@@ -20,7 +19,8 @@ import numpy as np
 import xarray as xr
 
 from ..progress import Progress
-from .detector import Detector, apply_detector
+from . import kernels
+from .detector import Detector, KeyedNoise, detector_key
 from .metrics import EncircledEnergy, centroid_px, fwhm_arcsec, strehl
 
 IMAGE_CRITERIA = (("strehl", True), ("d50", False))
@@ -40,6 +40,23 @@ class ExternalCriterion:
     larger_is_better: bool
     units: str = "1"
     long_name: str = ""
+
+
+@dataclass(frozen=True, eq=False)
+class ImageReference:
+    """Per-frame image measurements of another target's detected frames (e.g. the on-axis
+    star) that select and recentre a target: ``strehl`` and ``d50_arcsec`` (detector, frame)
+    replace the target's own image criteria, ``centroid_px`` (detector, frame, 2) its own
+    centres of gravity for the shifts (same detectors, in the same order)."""
+
+    strehl: np.ndarray
+    d50_arcsec: np.ndarray
+    centroid_px: np.ndarray
+
+    @classmethod
+    def of(cls, result: xr.Dataset) -> "ImageReference":
+        """The reference given by another target's :func:`run_lucky` result."""
+        return cls(result.frame_strehl.values, result.frame_d50_arcsec.values, result.frame_centroid_px.values)
 
 
 def fraction_counts(n_frames: int, fractions: Sequence[float]) -> np.ndarray:
@@ -96,15 +113,16 @@ def shift_frames(frames: np.ndarray, shifts_px: np.ndarray) -> np.ndarray:
 
     Circular shift with ``np.roll`` semantics, ``out[y, x] = in[(y - s_y) mod n,
     (x - s_x) mod n]``: consistent with the simulated field, which is periodic over
-    the frame (a frame is the power spectrum of a sampled pupil). Vectorised gather.
+    the frame (a frame is the power spectrum of a sampled pupil). Four block copies a frame.
     """
     frames = np.asarray(frames)
     k, ny, nx = frames.shape
     shifts_px = np.asarray(shifts_px, dtype=np.int64).reshape(k, 2)
-    rows = (np.arange(ny)[None, :] - shifts_px[:, :1]) % ny  # (k, ny)
-    cols = (np.arange(nx)[None, :] - shifts_px[:, 1:]) % nx  # (k, nx)
-    out = np.take_along_axis(frames, rows[:, :, None], axis=1)
-    return np.take_along_axis(out, cols[:, None, :], axis=2)
+    out = np.empty_like(frames)
+    for frame, moved, (sy, sx) in zip(frames, out, shifts_px % (ny, nx)):
+        moved[sy:, sx:], moved[sy:, :sx] = frame[:ny - sy, :nx - sx], frame[:ny - sy, nx - sx:]
+        moved[:sy, sx:], moved[:sy, :sx] = frame[ny - sy:, :nx - sx], frame[ny - sy:, nx - sx:]
+    return out
 
 
 def shift_and_add(frames: np.ndarray) -> np.ndarray:
@@ -118,37 +136,60 @@ def shift_and_add(frames: np.ndarray) -> np.ndarray:
     return shift_frames(frames, shifts).sum(axis=0, dtype=np.float64)
 
 
-def detector_key(name: str) -> int:
-    """Stable integer of a detector's name that keys its noise: ``zlib.crc32`` of its UTF-8.
-
-    Not Python's ``hash`` (salted per process), so draws are reproducible across runs.
-    """
-    return zlib.crc32(name.encode("utf-8"))
-
-
-def _noisy(frames: np.ndarray, detector: Detector, seed: int, start: int) -> np.ndarray:
-    """Detector frames of one chunk; the rng is ``default_rng([seed, detector_key(name),
-    start])``: the draws depend on the detector's name, not on the other detectors."""
-    return apply_detector(frames, detector,
-                          np.random.default_rng([seed, detector_key(detector.name), start]))
-
-
-def _score(partial: np.ndarray, n: int, n_bins: int, last_bin: np.ndarray,
+def _score(partial: np.ndarray, n_crit: int, n_bins: int, last_bin: np.ndarray,
            encircled: EncircledEnergy, diffraction_limited_peak: float,
            pixel_scale_arcsec: float) -> tuple[np.ndarray, ...]:
-    """Integrated images of the (det, criterion x bin, n x n) partial sums (cumulative sums
-    of the bins of each fraction), as (criterion, fraction, det, n, n), and their Strehl,
-    FWHM [arcsec] and d50 [arcsec] (criterion, fraction, det). One code path for the noisy
-    and the noiseless sums, so equal sums give bit-identical scores."""
-    n_det, rows, _ = partial.shape
-    cumulative = np.cumsum(partial.reshape(n_det, rows // n_bins, n_bins, n, n), axis=2)
-    images = cumulative[:, :, last_bin]  # (det, crit, fraction, n, n)
+    """Integrated images of the (det, criterion x bin, n, n) partial sums (cumulative sums
+    of the bins of each fraction, made in place: ``partial`` is overwritten), as
+    (criterion, fraction, det, n, n), and their Strehl, FWHM [arcsec] and d50 [arcsec]
+    (criterion, fraction, det). One code path for the noisy and the noiseless sums, so
+    equal sums give bit-identical scores."""
+    n_det, _, ny, nx = partial.shape
+    cumulative = partial.reshape(n_det, n_crit, n_bins, ny, nx)
+    for b in range(1, n_bins):  # np.cumsum's sums, in place
+        cumulative[:, :, b] += cumulative[:, :, b - 1]
+    # (crit, fraction, det, n, n), contiguous: the d50's batches need no copy of it
+    images = np.empty((n_crit, len(last_bin), n_det, ny, nx))
+    for i in range(n_det):
+        images[:, :, i] = cumulative[i][:, last_bin]
     del cumulative
-    images = np.moveaxis(images, 0, 2)  # (crit, fraction, det, n, n)
     s_int = strehl(images, diffraction_limited_peak)
     d50_int = 2 * encircled.radius_px(images) * pixel_scale_arcsec
     fwhm_int = fwhm_arcsec(images, pixel_scale_arcsec)
     return images, s_int, fwhm_int, d50_int
+
+
+def _add_noiseless_detector(frames: np.ndarray, shifts: np.ndarray, rows: np.ndarray, partial: np.ndarray,
+                            partial_noiseless: np.ndarray, long_row: int | None = None,
+                            frame_window: np.ndarray | None = None, window: np.ndarray | None = None) -> None:
+    """A noiseless detector's chunk of frames (k, n, n) float32, recentred by ``shifts``
+    (k, 2), into the rows ``rows`` (k, m) (-1: none; ``long_row``: the recentred long
+    exposure) of its partial sums (R, n, n) float64, both sets: per chunk one float32
+    matrix product (criterion x bin rows) @ (frames), added in float64; the long
+    exposure's sum in float64; the window's values into ``frame_window``."""
+    k, n, _ = frames.shape
+    flat = shift_frames(frames, shifts).reshape(k, n * n)
+    n_rows = partial_noiseless.shape[0]
+    one_hot = np.zeros((n_rows, k), dtype=np.float32)
+    kept = (rows >= 0) & (rows != long_row) if long_row is not None else rows >= 0
+    frame_index, _ = np.nonzero(kept)
+    one_hot[rows[kept], frame_index] = 1.0
+    if kept.any():
+        summed = (one_hot @ flat).reshape(n_rows, n, n)
+        partial[:n_rows] += summed
+        partial_noiseless += summed
+    if long_row is not None:
+        partial[long_row] += flat.sum(axis=0, dtype=np.float64).reshape(n, n)
+        frame_window[:] = flat[:, window]
+
+
+def _window(frames: np.ndarray, shifts: np.ndarray, window: np.ndarray, out: np.ndarray) -> None:
+    """Values (k, w) at the flat pixels ``window`` of frames (k, n, n) rolled by ``shifts``."""
+    n = frames.shape[-1]
+    wy, wx = window // n, window % n
+    src_y = (wy[None, :] - shifts[:, :1]) % n
+    src_x = (wx[None, :] - shifts[:, 1:]) % n
+    out[:] = frames[np.arange(len(frames))[:, None], src_y, src_x]
 
 
 def _chunks(iter_chunks: Callable[[], Iterable[tuple[int, np.ndarray]]],
@@ -178,41 +219,131 @@ def _attrs(units: str, long_name: str) -> dict:
     return {"units": units, "long_name": long_name}
 
 
+class _Blocks:
+    """Time blocks of a run, each selected and scored on its own (Monte-Carlo errors).
+
+    Frame ``f`` is in block ``f // block_frames`` (none past ``n_blocks`` blocks). A
+    block's (criterion, block bin) partial sums are rows ``row0 + (s n_crit + c) n_bins +
+    b`` of the run's partial sums, in row set ``s = block mod n_sets``: enough sets that
+    the blocks a chunk of frames spans never share one, so the chunks are processed
+    whole (the per-frame metrics do not depend on block boundaries), and each block is
+    scored and its set cleared after the chunk that completes it.
+    """
+
+    def __init__(self, n_frames: int, n_blocks: int, fractions, n_det: int, n_crit: int, row0: int):
+        if n_blocks == 1 or n_blocks < 0 or (n_blocks and n_frames // n_blocks < 1):
+            raise ValueError(f"n_blocks must be 0 (no errors) or >= 2 with a frame each, got {n_blocks}")
+        self.n_blocks, self.row0, self.n_crit = n_blocks, row0, n_crit
+        self.block_frames = n_frames // n_blocks if n_blocks else 0
+        self.counts = fraction_counts(max(self.block_frames, 1), fractions)
+        self.n_bins = len(np.unique(self.counts)) if n_blocks else 0
+        self.last_bin = np.searchsorted(np.unique(self.counts), self.counts)
+        self.n_sets = self.max_chunk = 0
+        self.bins = np.full((n_det, n_crit, n_frames), -1, dtype=np.int64)
+        shape = (n_blocks, n_crit, len(self.counts), n_det)
+        self.values = tuple(np.full(shape, np.nan) for _ in range(3))  # Strehl, FWHM, d50
+
+    def prepare(self, chunk_frames: int) -> int:
+        """Rows needed for chunks of up to ``chunk_frames`` frames (the first chunk's)."""
+        if self.n_blocks:
+            self.max_chunk = chunk_frames
+            self.n_sets = min(self.n_blocks, -(-chunk_frames // self.block_frames) + 1)
+        return self.n_sets * self.n_crit * self.n_bins
+
+    def assign(self, values: np.ndarray, larger_is_better, crits) -> None:
+        """Block bins of criteria ``crits`` from ``values`` (criterion, detector, frame)."""
+        for b in range(self.n_blocks):
+            sl = slice(b * self.block_frames, (b + 1) * self.block_frames)
+            for i in range(values.shape[1]):
+                for c in crits:
+                    order = rank_frames(values[c, i, sl], larger_is_better[c])
+                    self.bins[i, c, sl] = selection_bins(order, self.counts)[0]
+
+    def rows(self, i: int, crits, sl: slice) -> np.ndarray:
+        """Block rows (k, len(crits)) of detector ``i``'s frames ``sl`` (-1: none)."""
+        if not self.n_blocks:
+            return np.full((sl.stop - sl.start, 0), -1, dtype=np.int64)
+        if sl.stop - sl.start > self.max_chunk:
+            raise ValueError(f"a chunk of {sl.stop - sl.start} frames, more than the first's {self.max_chunk}")
+        block_set = (np.arange(sl.start, sl.stop) // self.block_frames % self.n_sets)[:, None]
+        bins = self.bins[i][crits][:, sl].T
+        first = self.row0 + (block_set * self.n_crit + np.asarray(crits, dtype=np.int64)) * self.n_bins
+        return np.where(bins >= 0, first + bins, -1)
+
+    def score_completed(self, sl: slice, crits, partial: np.ndarray, encircled, diffraction_limited_peak: float,
+                        pixel_scale_arcsec: float) -> None:
+        """Score the rows of criteria ``crits`` (contiguous) in ``partial`` (det, rows, n, n) of
+        every block the chunk ``sl`` completes, then clear them."""
+        if not self.n_blocks or not crits:
+            return
+        for block in range(sl.start // self.block_frames, min(sl.stop // self.block_frames, self.n_blocks)):
+            first = self.row0 + ((block % self.n_sets) * self.n_crit + crits[0]) * self.n_bins
+            rows = partial[:, first:first + len(crits) * self.n_bins]
+            _, *scores = _score(rows, len(crits), self.n_bins, self.last_bin, encircled,
+                                diffraction_limited_peak, pixel_scale_arcsec)
+            for values, score in zip(self.values, scores):
+                values[block, crits[0]:crits[-1] + 1] = score
+            rows[:] = 0.0
+
+
 def run_lucky(iter_chunks: Callable[[], Iterable[tuple[int, np.ndarray]]], n_frames: int,
               detectors: Sequence[Detector], fractions: Sequence[float],
               diffraction_limited_peak: float, pixel_scale_arcsec: float, seed: int,
               criteria_external: Sequence[ExternalCriterion] = (),
-              image_crop_px: int | None = 64,
-              progress_interval_s: float = 5.0) -> xr.Dataset:
+              image_crop_px: int | None = 64, reference: ImageReference | None = None,
+              n_blocks: int = 0, progress_interval_s: float = 5.0) -> xr.Dataset:
     """Lucky imaging of one frame cube for several detectors, criteria and fractions.
 
     ``iter_chunks()`` returns a fresh iterator of ``(start, frames)``: ``frames``
     (k, n, n) float32 noiseless unit-flux images of frames ``start..start+k-1``, in
-    order; it is called twice. ``diffraction_limited_peak``: the Strehl reference
+    order; it is called once or twice. ``diffraction_limited_peak``: the Strehl reference
     (``Imager.diffraction_limited_peak``) for unit flux at this sampling;
     ``pixel_scale_arcsec`` [arcsec/pixel]. Criteria: ``strehl`` and ``d50`` of each
-    noisy frame, then ``criteria_external`` (each (n_frames,)).
+    noisy frame, then ``criteria_external`` (each (n_frames,)). With a ``reference``
+    (:class:`ImageReference`, e.g. the on-axis star's frames), the image criteria and the
+    recentring shifts come from it instead of from these frames, whose own per-frame
+    Strehl, d50 and centroid are then not computed: ``frame_strehl``,
+    ``frame_d50_arcsec`` and ``frame_centroid_px`` are NaN (their flux, the long
+    exposures and ``frame_recentred_strehl`` are computed).
 
-    Pass 1 applies each detector's noise (rng ``default_rng([seed,
-    detector_key(name), start])`` (:func:`detector_key`): a detector's draws depend on the
-    seed and its name only, not on the other detectors, so detector names must be
-    distinct), measures per-frame Strehl, d50 and centre of gravity, and sums the
-    long exposure without recentring. Frames are then ranked
-    per criterion (:func:`rank_frames`) and assigned to nested bins
-    (:func:`selection_bins`). Pass 2 regenerates the same noise, recentres each frame
-    (:func:`recentring_shifts_px`, :func:`shift_frames`) and adds it into its
-    (criterion, bin) partial sum with one matrix product per chunk, and into the
-    recentred long exposure (all frames); each fraction's
-    image is the cumulative sum of its bins. Alongside, the noiseless frames (the input,
-    as float32) get the same detector's shifts (from the noisy centroids) and the same
-    bins (from the noisy ranking) into a second set of partial sums: the ``*_noiseless``
-    scores separate a wrong selection or recentring from the noise in the final image.
-    For a noiseless detector both sets receive the very same products, so the
-    ``*_noiseless`` values equal the others bit for bit. Both passes serve all
-    detectors, so the frames are read twice in total. Memory: the two sets of partial
-    sums, float64 (2 x detectors x criteria x distinct counts x n x n, the noiseless set
-    doubling what the noisy one alone needs), plus one chunk and, when scoring, the
-    integrated images (criteria x fractions x detectors x n x n) of one set at a time.
+    Noise: a noisy detector's frames come from :class:`luckyao.lucky.detector.KeyedNoise`,
+    whose draws for frame ``f`` are keyed by ``(seed, detector_key(name), f)``
+    (:func:`detector_key`): they depend on the seed, the detector's name and the frame
+    only, not on the chunking or the other detectors (names must be distinct), and
+    drawing them again gives the same frames. A noiseless detector's frames are the input
+    as float32.
+
+    Pass 1 detects each chunk for each detector, measures per-frame Strehl, d50 (noisy
+    detectors: :meth:`EncircledEnergy.radius_px_binned`, the same encircled energy summed
+    by radial bins) and centre of gravity, sums the long exposure without recentring,
+    and, since each frame's shift is known then (its own centroid, or the reference's),
+    recentres it (:func:`recentring_shifts_px`, np.roll semantics) into the recentred long
+    exposure and into the (criterion, bin) partial sums of the criteria ranked before
+    pass 1: the external ones, and with a reference all. Frames are ranked per criterion
+    (:func:`rank_frames`) and assigned to nested bins (:func:`selection_bins`). Without a
+    reference, pass 2 detects the frames again (the same draws; checked by their flux)
+    and adds them into the partial sums of the image criteria. Each fraction's image is
+    the cumulative sum of its bins. Alongside, the noiseless frames (the input, as
+    float32) get the same detector's shifts and the same bins into a second set of
+    partial sums: the ``*_noiseless`` scores separate a wrong selection or recentring
+    from the noise in the final image. A noisy detector's sums are float64 throughout
+    (:func:`luckyao.lucky.kernels.add_recentred`); a noiseless detector's are, per chunk,
+    one float32 matrix product (criterion x bin rows) @ (recentred frames) added in
+    float64, both sets receiving the very same products, so its ``*_noiseless`` values
+    equal the others bit for bit. Memory: the two sets of partial sums, float64
+    (2 x detectors x criteria x distinct counts x n x n), plus a chunk's work arrays
+    (~1 kB per pixel and frame of a chunk) and, when scoring, the integrated images
+    (criteria x fractions x detectors x n x n) of one set at a time (the cumulative
+    sums are made in place).
+
+    Monte-Carlo errors (``n_blocks`` >= 2): the frames are cut into ``n_blocks`` time
+    blocks of ``n_frames // n_blocks`` frames (the remainder left out), each block is
+    selected, recentred and scored on its own as a short run (the same fractions of its
+    frames, ranked within it), and the standard error of a value is the standard
+    deviation of its block values over ``sqrt(n_blocks)`` (batch means: the blocks are
+    independent when longer than the turbulence's correlation time; compare
+    ``tests/test_errors.py``). The blocks' partial sums are extra rows of the same
+    sums (:class:`_Blocks`), scored and cleared after the chunk that ends the block.
 
     Returns a CF-style :class:`xarray.Dataset`: ``strehl``, ``fwhm_arcsec``,
     ``d50_arcsec`` (criterion, fraction, detector) and the same of the noiseless frames
@@ -224,7 +355,9 @@ def run_lucky(iter_chunks: Callable[[], Iterable[tuple[int, np.ndarray]]], n_fra
     (criterion, detector, frame); unless ``image_crop_px`` is 0, the central
     ``image_crop_px`` square (None: whole frame) of the integrated images normalised
     to unit flux, ``image`` (criterion, fraction, detector, y, x) and
-    ``long_exposure_image`` (recentring, detector, y, x).
+    ``long_exposure_image`` (recentring, detector, y, x); with blocks, ``strehl_block``,
+    ``fwhm_arcsec_block``, ``d50_arcsec_block`` (block, criterion, fraction, detector)
+    and the errors ``strehl_error``, ``fwhm_arcsec_error``, ``d50_arcsec_error``.
     """
     detectors = list(detectors)
     counts = fraction_counts(n_frames, fractions)
@@ -237,87 +370,160 @@ def run_lucky(iter_chunks: Callable[[], Iterable[tuple[int, np.ndarray]]], n_fra
     names = [d.name for d in detectors]
     if len(set(names)) != n_det or len({detector_key(name) for name in names}) != n_det:
         raise ValueError(f"detector names must be distinct (and their crc32 too): {names}")
+    if reference is not None and (np.shape(reference.centroid_px) != (n_det, n_frames, 2)
+                                  or np.shape(reference.strehl) != (n_det, n_frames)
+                                  or np.shape(reference.d50_arcsec) != (n_det, n_frames)):
+        raise ValueError(f"reference: centroids {np.shape(reference.centroid_px)} and criteria "
+                         f"{np.shape(reference.strehl)} do not match (detector, frame) = {(n_det, n_frames)}")
 
-    # pass 1: per-frame metrics and centroids, long exposure without recentring
+    # criteria known before the frames are read: the external ones, and with a reference
+    # the image ones too; their bins (and the reference's shifts) serve pass 1
+    n_bins = len(np.unique(counts))
+    values = np.full((n_crit, n_det, n_frames), np.nan)
+    for j, c in enumerate(criteria_external):
+        values[2 + j] = np.asarray(c.values, dtype=np.float64)[None, :]
+    if reference is not None:
+        values[0], values[1] = reference.strehl, reference.d50_arcsec
+    early = list(range(2 if reference is None else 0, n_crit))  # criteria binned before pass 1
+    bin_of_frame = np.full((n_det, n_crit, n_frames), -1, dtype=np.int64)
+    last_bin = np.searchsorted(np.unique(counts), counts)
+
+    blocks = _Blocks(n_frames, n_blocks, fractions, n_det, n_crit, row0=n_crit * n_bins + 1)
+
+    def assign_bins(crits):
+        for i in range(n_det):
+            for c in crits:
+                bin_of_frame[i, c] = selection_bins(rank_frames(values[c, i], criteria[c][1]), counts)[0]
+        blocks.assign(values, [larger for _, larger in criteria], crits)
+
+    assign_bins(early)
+    shifts = None
+
+    # pass 1: detected frames, per-frame metrics and centroids, long exposure without
+    # recentring; the criteria binned early are accumulated already
     frame_strehl = np.full((n_det, n_frames), np.nan)
     frame_d50_px = np.full((n_det, n_frames), np.nan)
     frame_centroid = np.full((n_det, n_frames, 2), np.nan)
     frame_flux = np.full((n_det, n_frames), np.nan)
-    encircled = long_none = long_cog = None
+    encircled = long_none = partial = partial_noiseless = partial_rows = noiseless_rows = None
+    noise = buffer = None
+    frame_window = window = None
+    lc = n_crit * n_bins  # row of the recentred long exposure (all frames) in partial
+    row_of = np.arange(n_crit)[:, None] * n_bins  # first row of each criterion
     progress = Progress("lucky pass 1/2: frames", n_frames, progress_interval_s)
     for start, frames in _chunks(iter_chunks, n_frames):
-        n = frames.shape[-1]
+        k, n = len(frames), frames.shape[-1]
         if encircled is None:
             encircled = EncircledEnergy(n)
             long_none = np.zeros((n_det, n, n))
-            long_cog = np.zeros((n_det, n, n))
-        sl = slice(start, start + len(frames))
+            # images n^2 + 8 apart (not a power of two: no cache-set conflicts), viewed (n, n)
+            n_rows = lc + 1 + blocks.prepare(k)
+            partial_rows = np.zeros((n_det, n_rows, n * n + 8))
+            noiseless_rows = np.zeros((n_det, lc, n * n + 8))
+            partial = partial_rows[..., :n * n].reshape(n_det, n_rows, n, n)
+            partial_noiseless = noiseless_rows[..., :n * n].reshape(n_det, lc, n, n)
+            around = n // 2 + np.arange(-3, 4)
+            window = (around[:, None] * n + around).ravel()  # 7 x 7 pixels around the axis
+            frame_window = np.empty((n_det, n_frames, window.size), dtype=np.float32)
+            if reference is not None:
+                shifts = recentring_shifts_px(reference.centroid_px, n)
+            else:
+                shifts = np.zeros((n_det, n_frames, 2), dtype=np.int64)
+        sl = slice(start, start + k)
+        unit = None
         for i, detector in enumerate(detectors):
-            noisy = _noisy(frames, detector, seed, start)
-            centroids = centroid_px(noisy)
-            frame_centroid[i, sl] = centroids
-            frame_flux[i, sl] = noisy.sum(axis=(-2, -1), dtype=np.float64)
-            frame_strehl[i, sl] = strehl(noisy, diffraction_limited_peak)
-            frame_d50_px[i, sl] = encircled.radius_px(noisy, centres_px=centroids) * 2
-            long_none[i] += noisy.sum(axis=0, dtype=np.float64)
+            if detector.noiseless:
+                detected = np.array(frames, dtype=np.float32, copy=True)
+                flux = detected.sum(axis=(-2, -1), dtype=np.float64)
+                if reference is None:
+                    centroids = centroid_px(detected)
+                    frame_strehl[i, sl] = strehl(detected, diffraction_limited_peak)
+                    frame_d50_px[i, sl] = encircled.radius_px(detected, centres_px=centroids) * 2
+                long_none[i] += detected.sum(axis=0, dtype=np.float64)
+            else:
+                if noise is None or noise.max_frames < k:
+                    noise = KeyedNoise(n, max(k, 64))
+                    buffer = np.empty((noise.max_frames, n, n), np.float32)
+                if unit is None:
+                    noise.prepare(frames)
+                    unit = np.asarray(frames, dtype=np.float32)
+                detected, rows, cols, peak = noise.detect(detector, seed, start, buffer)
+                flux = rows.sum(axis=1)
+                if reference is None:
+                    with np.errstate(invalid="ignore", divide="ignore"):
+                        centroids = np.stack([rows @ np.arange(n, dtype=np.float64) / flux,
+                                              cols @ np.arange(n, dtype=np.float64) / flux], axis=-1)
+                        frame_strehl[i, sl] = np.where(flux > 0, peak / (diffraction_limited_peak * flux), np.nan)
+                    frame_d50_px[i, sl] = encircled.radius_px_binned(detected, centroids) * 2
+                kernels.add_frames(detected, long_none[i])
+            frame_flux[i, sl] = flux
+            if reference is None:
+                frame_centroid[i, sl] = centroids
+                shifts[i, sl] = recentring_shifts_px(centroids, n)
+            # the early criteria and the recentred long exposure: shifts known now
+            rows_early = (row_of[early] + bin_of_frame[i][early][:, sl]).T  # (k, early)
+            rows_early = np.where(bin_of_frame[i][early][:, sl].T >= 0, rows_early, -1)
+            rows_early = np.concatenate([rows_early, np.full((k, 1), lc)], axis=1)
+            rows_block = blocks.rows(i, early, sl)
+            if detector.noiseless:
+                _add_noiseless_detector(detected, shifts[i, sl], rows_early, partial[i], partial_noiseless[i],
+                                        lc, frame_window[i, sl], window)
+                kernels.add_recentred(detected, shifts[i, sl], rows_block, partial_rows[i])
+            else:
+                kernels.add_recentred(detected, shifts[i, sl], np.concatenate([rows_early, rows_block], axis=1),
+                                      partial_rows[i])
+                kernels.add_recentred(unit, shifts[i, sl], rows_early[:, :-1], noiseless_rows[i])
+                _window(detected, shifts[i, sl], window, frame_window[i, sl])
+        blocks.score_completed(sl, early, partial, encircled, diffraction_limited_peak, pixel_scale_arcsec)
         progress.update(sl.stop)
     frame_d50_arcsec = frame_d50_px * pixel_scale_arcsec
-    shifts = recentring_shifts_px(frame_centroid, n)
 
-    # ranking: per detector and criterion, frames to nested bins
-    values = np.empty((n_crit, n_det, n_frames))
-    values[0], values[1] = frame_strehl, frame_d50_arcsec
-    for j, c in enumerate(criteria_external):
-        values[2 + j] = np.asarray(c.values, dtype=np.float64)[None, :]
-    n_bins = len(np.unique(counts))
-    bin_of_frame = np.empty((n_det, n_crit, n_frames), dtype=np.int64)
-    for i in range(n_det):
-        for c, (_, larger) in enumerate(criteria):
-            order = rank_frames(values[c, i], larger)
-            bin_of_frame[i, c], last_bin = selection_bins(order, counts)
-
-    # pass 2: same noise, recentre, accumulate into (criterion, bin) partial sums
-    partial = np.zeros((n_det, n_crit * n_bins, n * n))
-    partial_noiseless = np.zeros((n_det, n_crit * n_bins, n * n))
-    around = n // 2 + np.arange(-3, 4)
-    centre_window = (around[:, None] * n + around).ravel()  # 7 x 7 pixels around the axis
-    frame_window = np.empty((n_det, n_frames, centre_window.size), dtype=np.float32)
-    rows = np.arange(n_crit)[:, None] * n_bins  # row offset of each criterion
-    progress = Progress("lucky pass 2/2: frames", n_frames, progress_interval_s)
-    for start, frames in _chunks(iter_chunks, n_frames):
-        k = len(frames)
-        sl = slice(start, start + k)
-        noiseless = None
-        for i, detector in enumerate(detectors):
-            noisy = _noisy(frames, detector, seed, start)
-            if not np.array_equal(noisy.sum(axis=(-2, -1), dtype=np.float64), frame_flux[i, sl]):
-                raise RuntimeError(f"frames {start}.. differ between the two passes")
-            flat = shift_frames(noisy, shifts[i, sl]).reshape(k, n * n)
-            bins = bin_of_frame[i][:, sl]  # (n_crit, k)
-            one_hot = np.zeros((n_crit * n_bins, k), dtype=np.float32)
-            kept = bins >= 0
-            _, frame_index = np.nonzero(kept)
-            one_hot[(rows + bins)[kept], frame_index] = 1.0
-            summed = one_hot @ flat
-            partial[i] += summed
-            if not detector.noiseless:  # the noiseless frames, same shifts and bins
-                if noiseless is None:  # what a noiseless detector gives (apply_detector)
-                    noiseless = np.asarray(frames, dtype=np.float32)
-                summed = one_hot @ shift_frames(noiseless, shifts[i, sl]).reshape(k, n * n)
-            partial_noiseless[i] += summed
-            long_cog[i] += flat.sum(axis=0, dtype=np.float64).reshape(n, n)
-            frame_window[i, sl] = flat[:, centre_window]
-        progress.update(sl.stop)
-    frame_recentred_strehl = _value_at_peak(frame_window, centre_window, long_cog, frame_flux,
+    # ranking of the image criteria of the frames themselves
+    late = [c for c in range(n_crit) if c not in early]
+    if late:
+        values[0], values[1] = frame_strehl, frame_d50_arcsec
+        assign_bins(late)
+        # pass 2: the same noise again, recentred into the late criteria's partial sums
+        progress = Progress("lucky pass 2/2: frames", n_frames, progress_interval_s)
+        for start, frames in _chunks(iter_chunks, n_frames):
+            k = len(frames)
+            sl = slice(start, start + k)
+            unit = None
+            if noise is not None and noise.max_frames < k:
+                noise = KeyedNoise(n, k)
+                buffer = np.empty((k, n, n), np.float32)
+            for i, detector in enumerate(detectors):
+                rows_late = np.where(bin_of_frame[i][late][:, sl].T >= 0,
+                                     (row_of[late] + bin_of_frame[i][late][:, sl]).T, -1)
+                rows_block = blocks.rows(i, late, sl)
+                if detector.noiseless:
+                    detected = np.array(frames, dtype=np.float32, copy=True)
+                    _add_noiseless_detector(detected, shifts[i, sl], rows_late, partial[i], partial_noiseless[i])
+                    kernels.add_recentred(detected, shifts[i, sl], rows_block, partial_rows[i])
+                    continue
+                if unit is None:
+                    noise.prepare(frames)
+                    unit = np.asarray(frames, dtype=np.float32)
+                detected, rows, _, _ = noise.detect(detector, seed, start, buffer)
+                if not np.array_equal(rows.sum(axis=1), frame_flux[i, sl]):
+                    raise RuntimeError(f"frames {start}.. differ between the two passes")
+                kernels.add_recentred(detected, shifts[i, sl], np.concatenate([rows_late, rows_block], axis=1),
+                                      partial_rows[i])
+                kernels.add_recentred(unit, shifts[i, sl], rows_late, noiseless_rows[i])
+            blocks.score_completed(sl, late, partial, encircled, diffraction_limited_peak, pixel_scale_arcsec)
+            progress.update(sl.stop)
+    long_cog = partial[:, lc]
+    frame_recentred_strehl = _value_at_peak(frame_window, window, long_cog, frame_flux,
                                             diffraction_limited_peak)
 
     # integrated images: cumulative sums of bins, scored
-    scoring = (n, n_bins, last_bin, encircled, diffraction_limited_peak, pixel_scale_arcsec)
+    scoring = (n_crit, n_bins, last_bin, encircled, diffraction_limited_peak, pixel_scale_arcsec)
     _, s_nl, fwhm_nl, d50_nl = _score(partial_noiseless, *scoring)
-    del partial_noiseless
-    images, s_int, fwhm_int, d50_int = _score(partial, *scoring)
-    del partial
+    del partial_noiseless, noiseless_rows
     long_images = np.stack([long_none, long_cog])  # (recentring, det, n, n)
+    images, s_int, fwhm_int, d50_int = _score(partial[:, :lc], *scoring)
+    block_values = blocks.values
+    del partial, partial_rows, long_cog
     s_long = strehl(long_images, diffraction_limited_peak)
     d50_long = 2 * encircled.radius_px(long_images) * pixel_scale_arcsec
     fwhm_long = fwhm_arcsec(long_images, pixel_scale_arcsec)
@@ -331,14 +537,23 @@ def run_lucky(iter_chunks: Callable[[], Iterable[tuple[int, np.ndarray]]], n_fra
     ds["fwhm_arcsec_noiseless"] = (sel, fwhm_nl, _attrs("arcsec", f"FWHM {same}"))
     ds["d50_arcsec_noiseless"] = (sel, d50_nl, _attrs(
         "arcsec", f"diameter enclosing 50% of the energy {same}"))
+    if blocks.n_blocks:
+        block_dims = ("block", "criterion", "fraction", "detector")
+        for metric, values_b in zip(("strehl", "fwhm_arcsec", "d50_arcsec"), block_values):
+            ds[f"{metric}_block"] = (block_dims, values_b, _attrs(
+                ds[metric].attrs["units"], f"{ds[metric].attrs['long_name']}, each time block selected on its own "
+                                           f"({blocks.block_frames} frames)"))
+            ds[f"{metric}_error"] = (sel, values_b.std(axis=0, ddof=1) / np.sqrt(blocks.n_blocks), _attrs(
+                ds[metric].attrs["units"], f"Monte-Carlo standard error of {metric}, from {blocks.n_blocks} "
+                                           "time blocks (batch means)"))
     ds["frame_recentred_strehl"] = (("detector", "frame"), frame_recentred_strehl, _attrs(
         "1", "recentred frame's value at the recentred long exposure's peak pixel (within 3 pixels of the axis) "
              "over its flux and the diffraction-limited peak (their mean is that long exposure's Strehl)"))
     if image_crop_px != 0:
         with np.errstate(invalid="ignore", divide="ignore"):
-            unit = images / images.sum(axis=(-2, -1), keepdims=True)
-            unit_long = long_images / long_images.sum(axis=(-2, -1), keepdims=True)
-        unit, unit_long = _crop(unit, image_crop_px), _crop(unit_long, image_crop_px)
+            # the crop of the image over its flux (elementwise: as cropping after dividing)
+            unit = _crop(images, image_crop_px) / images.sum(axis=(-2, -1), keepdims=True)
+            unit_long = _crop(long_images, image_crop_px) / long_images.sum(axis=(-2, -1), keepdims=True)
         m = unit.shape[-1]
         offsets = np.arange(m) - m // 2
         ds = ds.assign_coords(

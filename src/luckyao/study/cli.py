@@ -6,8 +6,12 @@
                      [--reconstructor R.nc] [--commands C.nc] --frames F --telemetry T
     luckyao reconstructor --spec JSON --out R.nc
     luckyao commands --spec JSON --out C.nc
-    luckyao lucky --settings JSON --frames F --telemetry T --out lucky.nc
+    luckyao lucky --settings JSON --frames F --telemetry T --out lucky.nc [--screens S.npy --screens-metadata S.nc]
     luckyao figure --id ID --settings JSON --out-prefix figures/ID  lucky.nc ...
+    luckyao table figures/longexp.nc
+    luckyao archive [--study-dir DIR] [--configfile OVERLAY ...] [--out A.tar]
+    luckyao verify A.tar [--case NAME] [--workdir DIR] [--rtol R] [--atol A] [--no-rerun]
+    luckyao lock [--out requirements.lock]
 """
 
 import argparse
@@ -46,6 +50,7 @@ def cmd_turbulence(args) -> None:
 
 def cmd_simulate(args) -> None:
     from .case import Case
+    from .config import imaged_targets
     from .datasets import FrameWriter, open_dataset, provenance, write_dataset
     from .simulation import lgs_chain, simulate
     from .turbulence import read_screens
@@ -62,17 +67,18 @@ def cmd_simulate(args) -> None:
         products = open_dataset(args.commands, "AO command")
         commands = products["command_matrix"].values, products["dm_slopes"].values
     attrs = provenance(f"luckyao frames of case {args.name}", config, args.seed)
+    imaged = imaged_targets(config)
     start = time.perf_counter()
-    with FrameWriter(args.frames, len(case.targets), case.n_frames, case.camera.n_pixels,
+    with FrameWriter(args.frames, imaged, case.n_frames, case.camera.n_pixels,
                      case.camera.pixel_scale_arcsec, attrs) as writer:
-        telemetry = simulate(case, screens, writer.write, sensor, estimator, commands)
+        telemetry = simulate(case, screens, writer.write, sensor, estimator, commands, imaged)
     elapsed = time.perf_counter() - start
     steps = case.n_frames * case.steps_per_frame
     logging.getLogger(__name__).info("simulated %d steps in %.1f s: %.3f ms per step (with I/O)",
                                      steps, elapsed, 1e3 * elapsed / steps)
     telemetry.attrs.update(provenance(f"luckyao telemetry of case {args.name}", config, args.seed))
     telemetry.attrs["case"] = args.name
-    write_dataset(telemetry, args.telemetry)
+    write_dataset(telemetry, args.telemetry, allow_nan={"axis_strehl"} if len(imaged) < len(case.targets) else ())
 
 
 def cmd_reconstructor(args) -> None:
@@ -98,13 +104,58 @@ def cmd_commands(args) -> None:
 def cmd_lucky(args) -> None:
     from .postprocess import lucky_case
 
-    lucky_case(json.loads(args.settings), args.frames, args.telemetry, args.out)
+    lucky_case(json.loads(args.settings), args.frames, args.telemetry, args.out, args.screens,
+               args.screens_metadata)
 
 
 def cmd_figure(args) -> None:
     from .figures import draw_figure
 
     draw_figure(args.id, json.loads(args.settings), args.inputs, args.out_prefix)
+
+
+def cmd_table(args) -> None:
+    from .datasets import open_dataset
+    from .figures import long_exposure_markdown
+
+    sys.stdout.write(long_exposure_markdown(open_dataset(args.data, "long_exposure_table figure data")))
+
+
+def cmd_archive(args) -> int:
+    """One tar file of a finished study; problems one line each (no traceback)."""
+    from .archive import archive
+
+    try:
+        archive(args.study_dir, args.configfile, args.out)
+    except ValueError as err:  # ConfigError, ArchiveError
+        for problem in str(err).splitlines():
+            print(f"luckyao archive: {problem}", file=sys.stderr)
+        return 1
+    return 0
+
+
+def cmd_verify(args) -> int:
+    """0 when the archive's checksums and the rerun case agree, else 1 naming what differs."""
+    from .archive import verify
+
+    try:
+        agrees = verify(args.archive, args.case, args.workdir, args.rtol, args.atol, args.cores, args.snakefile,
+                        rerun=not args.no_rerun)
+    except ValueError as err:
+        print(f"luckyao verify: FAILED: {err}", file=sys.stderr)
+        return 1
+    return 0 if agrees else 1
+
+
+def cmd_lock(args) -> None:
+    from .archive import requirements_lock
+
+    text = requirements_lock()
+    if args.out:
+        with open(args.out, "w") as f:
+            f.write(text)
+    else:
+        sys.stdout.write(text)
 
 
 def main(argv=None) -> int:
@@ -149,6 +200,8 @@ def main(argv=None) -> int:
     p.add_argument("--frames", required=True)
     p.add_argument("--telemetry", required=True)
     p.add_argument("--out", required=True)
+    p.add_argument("--screens", default="", help="screens, to replay the targets the simulation did not image")
+    p.add_argument("--screens-metadata", default="")
     p.set_defaults(func=cmd_lucky)
 
     p = sub.add_parser("figure", help="draw one figure and write its data")
@@ -157,6 +210,31 @@ def main(argv=None) -> int:
     p.add_argument("--out-prefix", required=True)
     p.add_argument("inputs", nargs="*", help="lucky.nc files of the figure's cases, in order")
     p.set_defaults(func=cmd_figure)
+
+    p = sub.add_parser("table", help="a long_exposure_table figure's data as a Markdown table")
+    p.add_argument("data", help="the figure's .nc, e.g. figures/longexp.nc")
+    p.set_defaults(func=cmd_table)
+
+    p = sub.add_parser("archive", help="one tar file of a finished study, with checksums")
+    p.add_argument("--study-dir", default=".", help="the study folder Snakemake ran in (default: here)")
+    p.add_argument("--configfile", nargs="+", default=[], help="the overlays given to Snakemake's --configfile")
+    p.add_argument("--out", help="archive path (default: STUDY_DIR/archives/luckyao-<config hash>-<UTC time>.tar)")
+    p.set_defaults(func=cmd_archive)
+
+    p = sub.add_parser("verify", help="check an archive's checksums, rerun one case and compare its numbers")
+    p.add_argument("archive")
+    p.add_argument("--case", help="case to rerun (default: the one whose jobs took least time)")
+    p.add_argument("--workdir", help="folder of the rerun, kept (default: a scratch folder)")
+    p.add_argument("--rtol", type=float, default=0.0, help="relative tolerance (default 0: bit-identical)")
+    p.add_argument("--atol", type=float, default=0.0, help="absolute tolerance (default 0)")
+    p.add_argument("--cores", type=int, default=2, help="Snakemake cores of the rerun")
+    p.add_argument("--snakefile", help="workflow of the rerun (default: this checkout's)")
+    p.add_argument("--no-rerun", action="store_true", help="checksums and versions only")
+    p.set_defaults(func=cmd_verify)
+
+    p = sub.add_parser("lock", help="print (or --out) the exact versions of the runtime packages")
+    p.add_argument("--out", help="file to write, e.g. requirements.lock")
+    p.set_defaults(func=cmd_lock)
 
     args = parser.parse_args(argv)
     _setup_logging()

@@ -107,6 +107,10 @@ def _check_case(name: str, case: dict, turbulence: dict) -> None:
                               f"exposure ends (at least wfs.exposure_steps = {case['wfs']['exposure_steps']})")
     if case["telescope"]["obscuration_m"] >= case["telescope"]["diameter_m"]:
         raise ConfigError(f"config key '{where}.telescope.obscuration_m': must be below diameter_m")
+    reference = case.get("reference_target")
+    if reference is not None and reference >= len(case["targets_arcsec"]):
+        raise ConfigError(f"config key '{where}.reference_target': {reference} is not the index of one of the "
+                          f"{len(case['targets_arcsec'])} targets_arcsec")
     radius = turbulence["field_radius_arcsec"]
     for x, y in case["targets_arcsec"]:
         if (x * x + y * y) ** 0.5 > radius:
@@ -154,8 +158,27 @@ def _check_figure(fig_id: str, figure: dict, cases: dict, config: dict) -> None:
     for case in figure["cases"]:
         if case not in config["cases"]:
             raise ConfigError(f"config key 'figures.{fig_id}.cases': unknown case '{case}'")
-    if figure["kind"] == "quality_vs_fraction" and "criteria" not in figure:
+    if figure["kind"] in ("quality_vs_fraction", "quality_vs_distance") and "criteria" not in figure:
         raise ConfigError(f"config key 'figures.{fig_id}.criteria': required for {figure['kind']}")
+    if figure["kind"] == "comparisons":
+        if "pairs" not in figure:
+            raise ConfigError(f"config key 'figures.{fig_id}.pairs': required for comparisons")
+        for i, pair in enumerate(figure["pairs"]):
+            for side in ("a", "b"):
+                case, criterion = pair[side]["case"], pair[side]["criterion"]
+                if case not in figure["cases"]:
+                    raise ConfigError(f"config key 'figures.{fig_id}.pairs[{i}].{side}.case': '{case}' is not "
+                                      f"in the figure's cases")
+                if case in cases and criterion not in criteria_of(cases[case]):
+                    raise ConfigError(f"config key 'figures.{fig_id}.pairs[{i}].{side}.criterion': case '{case}' "
+                                      f"cannot give {criterion}")
+    if figure["kind"] == "quality_vs_distance":
+        if "fractions" not in figure:
+            raise ConfigError(f"config key 'figures.{fig_id}.fractions': required for quality_vs_distance")
+        for case in figure["cases"]:
+            if case in cases and len(cases[case]["targets_arcsec"]) < 2:
+                raise ConfigError(f"config key 'figures.{fig_id}.cases': case '{case}' has one target; "
+                                  "quality_vs_distance needs a field of targets")
     for case in figure["cases"]:
         if case not in cases:  # invalid itself: reported with the cases
             continue
@@ -181,14 +204,23 @@ def _check_figure(fig_id: str, figure: dict, cases: dict, config: dict) -> None:
         if missing:
             raise ConfigError(f"config key 'figures.{fig_id}.read_noise_e': {sorted(missing)} not in "
                               "lucky.detector_sweep.read_noise_e")
-        missing = set(figure["fractions"]) - set(config["lucky"]["fractions"])
-        if missing:
-            raise ConfigError(f"config key 'figures.{fig_id}.fractions': {sorted(missing)} not in lucky.fractions")
+    missing = set(figure.get("fractions", [])) - set(config["lucky"]["fractions"])
+    if missing:
+        raise ConfigError(f"config key 'figures.{fig_id}.fractions': {sorted(missing)} not in lucky.fractions")
 
 
 def frame_count(case: dict) -> int:
     """Whole lucky frames in a resolved case's duration."""
     return int(np.floor(case["duration_s"] / case["camera"]["frame_time_s"] + 1e-9))
+
+
+def imaged_targets(case: dict) -> list[int]:
+    """Indices of the targets a resolved case's simulation images and stores: every target,
+    or with a ``reference_target`` and several targets only that one (the star); the
+    others are replayed where they are post-processed, so a field's frames never all
+    sit on disk."""
+    reference, n_targets = case.get("reference_target"), len(case["targets_arcsec"])
+    return list(range(n_targets)) if reference is None or n_targets == 1 else [reference]
 
 
 def criteria_of(case: dict) -> set[str]:

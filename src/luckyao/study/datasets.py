@@ -122,11 +122,12 @@ class FrameWriter:
     name only when the block closes without error.
     """
 
-    def __init__(self, path, n_targets: int, n_frames: int, n_pixels: int,
+    def __init__(self, path, targets, n_frames: int, n_pixels: int,
                  pixel_scale_arcsec: float, attrs: dict):
         self._atomic = atomic_path(path)
         self._atomic_target = path
-        self._shape = (n_targets, n_frames, n_pixels)
+        self._targets = list(targets)  # the case's indices of the targets stored
+        self._shape = (len(self._targets), n_frames, n_pixels)
         self._pixel_scale = pixel_scale_arcsec
         self._attrs = attrs
 
@@ -137,6 +138,9 @@ class FrameWriter:
         self._nc.setncatts(self._attrs)
         for dim, size in (("target", n_targets), ("frame", n_frames), ("y", n), ("x", n)):
             self._nc.createDimension(dim, size)
+        target = self._nc.createVariable("target", "i4", ("target",))
+        target[:] = self._targets
+        target.long_name = "index of the target in the case's targets_arcsec"
         for axis in ("y", "x"):
             coord = self._nc.createVariable(axis, "f8", (axis,))
             coord[:] = (np.arange(n) - n // 2) * self._pixel_scale
@@ -162,7 +166,8 @@ class FrameWriter:
 
 
 def iter_frame_blocks(path, target: int, block: int = 64):
-    """Callable returning an iterator of (start, frames (k, y, x) float32) for one target."""
+    """Callable returning an iterator of (start, frames (k, y, x) float32) for one target
+    (its index in the case's targets)."""
     path = Path(path)
     if not path.exists():
         raise FileNotFoundError(f"frames file '{path}' is missing; rerun the simulate step")
@@ -174,7 +179,11 @@ def iter_frame_blocks(path, target: int, block: int = 64):
             raise OSError(f"frames file '{path}' is unreadable or corrupt ({err})") from err
         with nc:
             frames = nc.variables["frames"]
+            stored = [int(t) for t in nc.variables["target"][:]]
+            if target not in stored:
+                raise ValueError(f"frames file '{path}' holds targets {stored}, not target {target}")
+            row = stored.index(target)
             for start in range(0, frames.shape[1], block):
-                yield start, np.asarray(frames[target, start:start + block], dtype=np.float32)
+                yield start, np.asarray(frames[row, start:start + block], dtype=np.float32)
 
     return iterate

@@ -66,13 +66,26 @@ def _style(ds: xr.Dataset, case) -> dict:
     return {"color": f"C{int(row.colour)}", "ls": _AO_STYLE[str(row.ao_mode.values)]}
 
 
+def _with_error(datasets, metric: str) -> list[str]:
+    """``metric`` and, when every case's lucky dataset has it, its Monte-Carlo error."""
+    return [metric] + ([f"{metric}_error"] if all(f"{metric}_error" in ds for ds in datasets) else [])
+
+
+def _band(ax, x, values: xr.Dataset, metric: str, colour: str) -> None:
+    """Shade +-1 standard error around a curve, when the figure's data has it."""
+    if f"{metric}_error" in values:
+        value, error = values[metric].values, values[f"{metric}_error"].values
+        ax.fill_between(np.asarray(x), value - error, value + error, color=colour, alpha=0.18, lw=0)
+
+
 def quality_vs_fraction_data(settings: dict, names, datasets) -> xr.Dataset:
     """Integrated-image quality (on-axis target) vs fraction selected, per case and criterion."""
     detector, criteria = settings.get("detector", "noiseless"), settings["criteria"]
     data_vars = {}
     for metric in _METRICS:
-        rows = [ds[metric].sel(criterion=criteria, detector=detector).isel(target=0).values for ds in datasets]
-        data_vars[metric] = (("case", "criterion", "fraction"), np.array(rows), dict(datasets[0][metric].attrs))
+        for name in _with_error(datasets, metric):
+            rows = [ds[name].sel(criterion=criteria, detector=detector).isel(target=0).values for ds in datasets]
+            data_vars[name] = (("case", "criterion", "fraction"), np.array(rows), dict(datasets[0][name].attrs))
     long_exposure = [ds["long_exposure_strehl"].sel(detector=detector).isel(target=0).values for ds in datasets]
     data_vars["long_exposure_strehl"] = (("case", "recentring"), np.array(long_exposure),
                                          dict(datasets[0]["long_exposure_strehl"].attrs))
@@ -93,6 +106,7 @@ def draw_quality_vs_fraction(ds: xr.Dataset, title: str):
                 row = ds.sel(case=case, criterion=criterion)
                 ax.plot(100 * ds.fraction, row[metric], marker="o", ms=3, label=str(row.label.values),
                         **_style(ds, case))
+                _band(ax, 100 * ds.fraction, row, metric, _style(ds, case)["color"])
                 if metric == "strehl":
                     ax.axhline(float(row.long_exposure_strehl.sel(recentring="none")), lw=0.8,
                                color=_style(ds, case)["color"], ls=":")
@@ -103,7 +117,8 @@ def draw_quality_vs_fraction(ds: xr.Dataset, title: str):
         letter = f"({chr(ord('a') + r)}) " if n_rows > 1 else ""
         axes[r, 0].set_title(f"{letter}selection by {_CRITERIA.get(criterion, criterion)}", loc="left", fontsize=10)
     fig.legend(*axes[0, 0].get_legend_handles_labels(), loc="outside lower center", ncol=2, fontsize=7,
-               title="solid: LTAO, dash-dot: GLAO, dashed: no AO; dotted: long exposure without recentring",
+               title="solid: LTAO, dash-dot: GLAO, dashed: no AO; dotted: long exposure without recentring; "
+                     "bands: +-1 Monte-Carlo standard error (time blocks)",
                title_fontsize=7)
     fig.suptitle(f"{title}: integrated-image quality vs fraction selected, detector {ds.attrs['detector']}")
     return fig
@@ -278,8 +293,8 @@ def quality_vs_signal_data(settings: dict, names, datasets) -> xr.Dataset:
         return np.array([[[[ds[variable].sel(criterion=c, fraction=f, detector=row).isel(target=0).values
                             for row in names_at] for f in fractions] for c in criteria] for ds in datasets])
 
-    data = {metric: (("case", "criterion", "fraction", "read_noise", "signal"), table(metric),
-                     dict(first[metric].attrs))}
+    data = {name: (("case", "criterion", "fraction", "read_noise", "signal"), table(name), dict(first[name].attrs))
+            for name in _with_error(datasets, metric)}
     if f"{metric}_noiseless" in first:
         data[f"{metric}_noiseless"] = (("case", "criterion", "fraction", "read_noise", "signal"),
                                        table(f"{metric}_noiseless"), dict(first[f"{metric}_noiseless"].attrs))
@@ -316,6 +331,7 @@ def draw_quality_vs_signal(ds: xr.Dataset, title: str):
                     label = f"{cell.label.values}, by {_CRITERIA.get(criterion, criterion)}"
                     ax.plot(ds.signal, cell[metric].sel(read_noise=read_noise), marker=markers[k % 5], ms=3.5,
                             label=label, **style)
+                    _band(ax, ds.signal, cell.sel(read_noise=read_noise), metric, style["color"])
                     if f"{metric}_noiseless" in ds:  # the same selection and shifts on the noiseless frames
                         ax.plot(ds.signal, cell[f"{metric}_noiseless"].sel(read_noise=read_noise), lw=0.8, ms=2.5,
                                 marker=markers[k % 5], color=style["color"], ls=":", alpha=0.8)
@@ -329,8 +345,132 @@ def draw_quality_vs_signal(ds: xr.Dataset, title: str):
             ax.grid(alpha=0.3)
     fig.legend(*axes[0, 0].get_legend_handles_labels(), loc="outside lower center", ncol=2, fontsize=7,
                title="markers: selection criterion; thin dotted with markers: the same selection and shifts on "
-                     "the noiseless frames; dotted line: noiseless detector", title_fontsize=7)
+                     "the noiseless frames; dotted line: noiseless detector; bands: +-1 Monte-Carlo standard error",
+               title_fontsize=7)
     fig.suptitle(f"{title}: integrated-image {_METRICS[metric]} vs signal per frame")
+    return fig
+
+
+def quality_vs_distance_data(settings: dict, names, datasets) -> xr.Dataset:
+    """Integrated-image quality vs the target's off-axis distance, per case, criterion and
+    fraction (field cases: the image criteria and the recentring from the case's reference
+    star, ``lgs_rms`` along each target), with each target's mean true residual rms and its
+    long-exposure Strehl (no recentring)."""
+    detector, criteria, fractions = settings.get("detector", "noiseless"), settings["criteria"], settings["fractions"]
+    first = datasets[0]
+    distance = np.hypot(first.target_x_arcsec.values, first.target_y_arcsec.values)
+    for name, ds in zip(names, datasets):
+        other = np.hypot(ds.target_x_arcsec.values, ds.target_y_arcsec.values)
+        if other.shape != distance.shape or not np.allclose(other, distance):
+            raise ValueError(f"case {name}: targets at {other} arcsec, the first case's at {distance}")
+    sel = ("case", "criterion", "fraction", "distance")
+    data = {name: (sel, np.array([ds[name].sel(criterion=criteria, fraction=fractions, detector=detector)
+                                  .transpose("criterion", "fraction", "target").values for ds in datasets]),
+                   dict(first[name].attrs)) for metric in _METRICS for name in _with_error(datasets, metric)}
+    data["long_exposure_strehl"] = (("case", "distance"), np.array(
+        [ds.long_exposure_strehl.sel(recentring="none", detector=detector).values for ds in datasets]),
+        {"units": "1", "long_name": "long-exposure Strehl ratio without recentring"})
+    data["mean_true_rms_nm"] = (("case", "distance"), np.array([ds.true_rms_nm.mean("frame").values
+                                                                for ds in datasets]),
+                                {"units": "nm", "long_name": "mean true tilt-removed residual rms along the target"})
+    data["reference_target"] = ("case", [int(ds.reference_target) for ds in datasets],
+                                {"units": "1", "long_name": "target that selects and recentres (-1: each its own)"})
+    return xr.Dataset(data, coords={
+        **_case_coords(settings, names, datasets),
+        "criterion": ("criterion", criteria, {"long_name": "selection criterion"}),
+        "fraction": ("fraction", fractions, {"units": "1", "long_name": "fraction of frames selected"}),
+        "distance": ("distance", distance, {"units": "arcsec", "long_name": "target's off-axis distance"})},
+        attrs={"detector": detector})
+
+
+def draw_quality_vs_distance(ds: xr.Dataset, title: str):
+    n_rows = ds.sizes["criterion"]
+    fig, axes = plt.subplots(n_rows, 4, figsize=(16, 3.6 * n_rows + 0.9), squeeze=False, constrained_layout=True)
+    markers = "os^vDP<>"
+    for r, criterion in enumerate(ds.criterion.values):
+        for ax, metric in zip(axes[r], _METRICS):
+            for case in ds.case.values:
+                for k, fraction in enumerate(ds.fraction.values):
+                    cell = ds.sel(case=case, criterion=criterion, fraction=fraction)
+                    ax.plot(ds.distance, cell[metric], marker=markers[k % 8], ms=3.5,
+                            label=f"{cell.label.values}, {100 * fraction:g} %", **_style(ds, case))
+                    _band(ax, ds.distance, cell, metric, _style(ds, case)["color"])
+            ax.set_xlabel("off-axis distance [arcsec]")
+            ax.set_ylabel(_METRICS[metric])
+            ax.grid(alpha=0.3)
+        axes[r, 0].set_title(f"({chr(ord('a') + r)}) selection by {_CRITERIA.get(criterion, criterion)}",
+                             loc="left", fontsize=10)
+        axes[r, 3].set_visible(r == 0)
+    ax = axes[0, 3]
+    for case in ds.case.values:
+        ax.plot(ds.distance, ds.mean_true_rms_nm.sel(case=case), marker="o", ms=3.5, **_style(ds, case))
+    ax.set_xlabel("off-axis distance [arcsec]")
+    ax.set_ylabel("mean true tilt-removed rms [nm]")
+    ax.set_title("residual wavefront along the target", loc="left", fontsize=10)
+    ax.grid(alpha=0.3)
+    fig.legend(*axes[0, 0].get_legend_handles_labels(), loc="outside lower center", ncol=3, fontsize=7,
+               title="selection (image criteria) and recentring on the on-axis star; lgs_rms along each target; "
+                     "solid: LTAO (corrected on axis), dashed: no AO; markers: fraction of frames; "
+                     "bands: +-1 Monte-Carlo standard error",
+               title_fontsize=7)
+    fig.suptitle(f"{title}: integrated-image quality vs off-axis distance, detector {ds.attrs['detector']}")
+    return fig
+
+
+def comparisons_data(settings: dict, names, datasets) -> xr.Dataset:
+    """Paired differences ``a - b`` of integrated-image quality vs fraction: two cases (or
+    two criteria of one case) that share the turbulence, so the Monte-Carlo error of the
+    difference comes from the per-time-block differences (paired), far below the
+    unpaired ``sqrt(e_a^2 + e_b^2)`` that the errors of each curve would suggest."""
+    detector = settings.get("detector", "noiseless")
+    by_name = dict(zip(names, datasets))
+    pairs = settings["pairs"]
+    data = {}
+    for metric, long_name in _METRICS.items():
+        value, paired, unpaired = [], [], []
+        for pair in pairs:
+            a, b = (by_name[pair[k]["case"]][[metric, f"{metric}_error", f"{metric}_block"]].sel(
+                criterion=pair[k]["criterion"], detector=detector).isel(target=0) for k in ("a", "b"))
+            if a.sizes["block"] != b.sizes["block"]:
+                raise ValueError(f"pair {pair['label']}: {a.sizes['block']} and {b.sizes['block']} time blocks")
+            blocks = (a[f"{metric}_block"] - b[f"{metric}_block"]).values  # (block, fraction)
+            value.append((a[metric] - b[metric]).values)
+            paired.append(blocks.std(axis=0, ddof=1) / np.sqrt(blocks.shape[0]))
+            unpaired.append(np.hypot(a[f"{metric}_error"].values, b[f"{metric}_error"].values))
+        units = datasets[0][metric].attrs["units"]
+        dims = ("pair", "fraction")
+        data[metric] = (dims, np.array(value), {"units": units, "long_name": f"difference a - b: {long_name}"})
+        data[f"{metric}_error"] = (dims, np.array(paired), {
+            "units": units, "long_name": "paired Monte-Carlo standard error of the difference (time blocks)"})
+        data[f"{metric}_unpaired_error"] = (dims, np.array(unpaired), {
+            "units": units, "long_name": "unpaired error sqrt(e_a^2 + e_b^2), for comparison"})
+    return xr.Dataset(data, coords={
+        "pair": ("pair", [p["label"] for p in pairs], {"long_name": "difference a - b"}),
+        "a": ("pair", [f"{p['a']['case']} by {p['a']['criterion']}" for p in pairs], {"long_name": "case a"}),
+        "b": ("pair", [f"{p['b']['case']} by {p['b']['criterion']}" for p in pairs], {"long_name": "case b"}),
+        "fraction": datasets[0]["fraction"]}, attrs={"detector": detector})
+
+
+def draw_comparisons(ds: xr.Dataset, title: str):
+    fig, axes = plt.subplots(1, 3, figsize=(15, 4.8), squeeze=False, constrained_layout=True)
+    x = 100 * ds.fraction.values
+    for ax, metric in zip(axes[0], _METRICS):
+        for k, pair in enumerate(ds.pair.values):
+            row, colour = ds.sel(pair=pair), f"C{k}"
+            ax.plot(x, row[metric], marker="o", ms=3, color=colour,
+                    label=f"{pair}: {row.a.values} - {row.b.values}")
+            _band(ax, x, row, metric, colour)
+            for sign in (-1, 1):
+                ax.plot(x, row[metric] + sign * row[f"{metric}_unpaired_error"], color=colour, lw=0.6, ls=":")
+        ax.axhline(0.0, color="k", lw=0.8)
+        ax.set_xscale("log")
+        ax.set_xlabel("frames selected [%]")
+        ax.set_ylabel(f"difference of {_METRICS[metric]}")
+        ax.grid(alpha=0.3)
+    fig.legend(*axes[0, 0].get_legend_handles_labels(), loc="outside lower center", ncol=2, fontsize=7,
+               title="bands: paired +-1 standard error (time blocks, shared turbulence); dotted: unpaired +-1 "
+                     "standard error", title_fontsize=7)
+    fig.suptitle(f"{title}: paired differences of integrated-image quality, detector {ds.attrs['detector']}")
     return fig
 
 
@@ -392,36 +532,68 @@ def draw_residuals(ds: xr.Dataset, title: str):
 
 
 def long_exposure_table_data(settings: dict, names, datasets) -> xr.Dataset:
-    """Every case's long-exposure Strehl (all frames) without and with recentring, with
-    Monte-Carlo standard errors from time blocks."""
+    """Every case's long-exposure Strehl (all frames) without and with recentring, and its
+    best lucky Strehl (the largest over criteria and fractions, and where it is), each with
+    its Monte-Carlo standard error from time blocks."""
     detector = settings.get("detector", "noiseless")
     strehl = [ds["long_exposure_strehl"].sel(detector=detector).isel(target=0).values for ds in datasets]
     error = [[float(ds["long_exposure_strehl_error"].isel(target=0)),
               float(ds["recentred_long_exposure_strehl_error"].sel(detector=detector).isel(target=0))]
              for ds in datasets]
-    return xr.Dataset(
-        {
-            "long_exposure_strehl": (("case", "recentring"), np.array(strehl),
-                                     dict(datasets[0]["long_exposure_strehl"].attrs)),
-            "long_exposure_strehl_error": (("case", "recentring"), np.array(error), {
-                "units": "1", "long_name": "Monte-Carlo standard error of the long-exposure Strehl (batch means)"}),
-        },
-        coords={**_case_coords(settings, names, datasets), "recentring": datasets[0]["recentring"]},
-        attrs={"detector": detector},
-    )
+    lucky = [ds.strehl.sel(detector=detector).isel(target=0) for ds in datasets]
+    best = [np.unravel_index(int(np.argmax(s.values)), s.shape) for s in lucky]  # (criterion, fraction)
+    data = {
+        "long_exposure_strehl": (("case", "recentring"), np.array(strehl),
+                                 dict(datasets[0]["long_exposure_strehl"].attrs)),
+        "long_exposure_strehl_error": (("case", "recentring"), np.array(error), {
+            "units": "1", "long_name": "Monte-Carlo standard error of the long-exposure Strehl (batch means)"}),
+        "best_lucky_strehl": ("case", [float(s.values[b]) for s, b in zip(lucky, best)], {
+            "units": "1", "long_name": "largest integrated-image Strehl over the criteria and fractions"}),
+        "best_criterion": ("case", [str(s.criterion.values[b[0]]) for s, b in zip(lucky, best)],
+                           {"long_name": "selection criterion of the best lucky Strehl"}),
+        "best_fraction": ("case", [float(s.fraction.values[b[1]]) for s, b in zip(lucky, best)],
+                          {"units": "1", "long_name": "fraction of frames of the best lucky Strehl"}),
+    }
+    if all("strehl_error" in ds for ds in datasets):
+        data["best_lucky_strehl_error"] = ("case", [
+            float(ds.strehl_error.sel(detector=detector).isel(target=0).values[b]) for ds, b in zip(datasets, best)],
+            {"units": "1", "long_name": "Monte-Carlo standard error of the best lucky Strehl (time blocks)"})
+    return xr.Dataset(data, coords={**_case_coords(settings, names, datasets),
+                                    "recentring": datasets[0]["recentring"]}, attrs={"detector": detector})
+
+
+def long_exposure_markdown(ds: xr.Dataset) -> str:
+    """The table of :func:`long_exposure_table_data` as Markdown (for the README)."""
+    def pm(value, error=None):
+        return f"{float(value):.3f}" + ("" if error is None else f" ± {float(error):.3f}")
+
+    lines = ["| case | long exposure | recentred | best lucky (criterion, fraction) |", "|---|---|---|---|"]
+    for case in ds.case.values:
+        row = ds.sel(case=case)
+        le = [pm(row.long_exposure_strehl.sel(recentring=r), row.long_exposure_strehl_error.sel(recentring=r))
+              for r in ("none", "cog")]
+        best = pm(row.best_lucky_strehl, row.best_lucky_strehl_error if "best_lucky_strehl_error" in row else None)
+        lines.append(f"| {case} | {le[0]} | {le[1]} | {best} ({row.best_criterion.values}, "
+                     f"{100 * float(row.best_fraction):g} %) |")
+    return "\n".join(lines) + "\n"
 
 
 def draw_long_exposure_table(ds: xr.Dataset, title: str):
     n = ds.sizes["case"]
     fig, ax = plt.subplots(figsize=(11, 0.32 * n + 1.2), constrained_layout=True)
     ax.axis("off")
+    def best(row):
+        error = f" ± {float(row.best_lucky_strehl_error):.4f}" if "best_lucky_strehl_error" in row else ""
+        return (f"{float(row.best_lucky_strehl):.4f}{error} ({row.best_criterion.values}, "
+                f"{100 * float(row.best_fraction):g} %)")
+
     cells = [[str(row.label.values)] + [f"{float(row.long_exposure_strehl.sel(recentring=r)):.4f} ± "
                                         f"{float(row.long_exposure_strehl_error.sel(recentring=r)):.4f}"
-                                        for r in ("none", "cog")]
+                                        for r in ("none", "cog")] + [best(row)]
              for row in (ds.sel(case=case) for case in ds.case.values)]
     table = ax.table(cells, colLabels=["case", "long-exposure Strehl, no recentring",
-                                       "recentred (centre of gravity)"], loc="center", cellLoc="left",
-                     colWidths=[0.62, 0.19, 0.19])
+                                       "recentred (centre of gravity)", "best lucky Strehl"], loc="center",
+                     cellLoc="left", colWidths=[0.46, 0.15, 0.15, 0.24])
     table.auto_set_font_size(False)
     table.set_fontsize(7.5)
     table.scale(1, 1.25)
@@ -436,6 +608,8 @@ FIGURE_KINDS = {
     "long_exposure_check": (long_exposure_check_data, draw_long_exposure_check),
     "long_exposure_table": (long_exposure_table_data, draw_long_exposure_table),
     "quality_vs_signal": (quality_vs_signal_data, draw_quality_vs_signal),
+    "quality_vs_distance": (quality_vs_distance_data, draw_quality_vs_distance),
+    "comparisons": (comparisons_data, draw_comparisons),
     "residuals": (residuals_data, draw_residuals),
 }
 

@@ -1,6 +1,7 @@
 """Lucky post-processing of one case: frames + telemetry -> ``lucky.nc``.
 
-Runs ``lucky.run_lucky`` for every target and detector, and adds what the
+Runs ``lucky.run_lucky`` for every target and detector (with a ``reference_target``,
+the star's frames select and recentre every target), and adds what the
 figures need from the telemetry: the long-exposure Strehl's Monte-Carlo error
 (batch means of the per-frame value on the axis) and the mean r0.
 """
@@ -12,10 +13,12 @@ import numpy as np
 import xarray as xr
 
 from ..lucky.detector import Detector
-from ..lucky.selection import ExternalCriterion, run_lucky
+from ..lucky.selection import ExternalCriterion, ImageReference, run_lucky
 from .case import Case
-from .config import canonical_json
+from .config import canonical_json, imaged_targets
 from .datasets import iter_frame_blocks, open_dataset, provenance, require_finite, write_dataset
+from .simulation import replay_frames
+from .turbulence import read_screens
 
 log = logging.getLogger(__name__)
 
@@ -35,28 +38,65 @@ def batch_mean_error(values: np.ndarray, n_blocks: int) -> float:
     return float(means.std(ddof=1) / np.sqrt(n_blocks))
 
 
-def lucky_case(settings: dict, frames_path, telemetry_path, out_path) -> None:
-    """Write one case's ``lucky.nc``; ``settings`` from ``config.lucky_settings``."""
+def _replayed(case: dict, telemetry: xr.Dataset, target: int, screens_path, screens_metadata_path):
+    """The frames of one target replayed from the screens and the recorded DM commands,
+    as ``iter_frame_blocks`` gives stored ones; each frame's value on the axis goes into
+    the telemetry's ``axis_strehl`` as the simulation records it for the targets it images."""
+    if not screens_path:
+        raise ValueError(f"target {target} was not imaged by the simulation: its replay needs the screens")
+    physics = Case.from_config(case)
+    commands = telemetry["dm_commands_m"].values if "dm_commands_m" in telemetry else None
+    replay = replay_frames(physics, read_screens(screens_path, screens_metadata_path), [target], commands,
+                           case["wfs"]["exposure_steps"])
+    axis = telemetry["axis_strehl"].values[target]
+    peak, centre = float(telemetry.attrs["diffraction_limited_peak"]), physics.camera.n_pixels // 2
+
+    def iterate():
+        for start, frames in replay():
+            axis[start:start + frames.shape[1]] = frames[0, :, centre, centre] / peak
+            yield start, frames[0]
+
+    return iterate
+
+
+def lucky_case(settings: dict, frames_path, telemetry_path, out_path, screens_path="",
+               screens_metadata_path="") -> None:
+    """Write one case's ``lucky.nc``; ``settings`` from ``config.lucky_settings``. The
+    targets the simulation did not image (:func:`.config.imaged_targets`) are replayed
+    from the screens with the recorded DM commands (:func:`.simulation.replay_frames`)."""
     telemetry = open_dataset(telemetry_path, "telemetry")
     case = settings["case_config"]
+    imaged = imaged_targets(case)
     detectors = [Detector(name, d["photons_per_frame"], d["read_noise_e"])
                  for name, d in settings["detectors"].items()]
     pixel_scale = Case.from_config(case).camera.pixel_scale_arcsec
-    n_frames = telemetry.sizes["frame"]
-    per_target = []
-    for target in range(telemetry.sizes["target"]):
-        log.info("target %d/%d", target + 1, telemetry.sizes["target"])
+    n_frames, n_targets = telemetry.sizes["frame"], telemetry.sizes["target"]
+    n_blocks = settings.get("error_blocks", 5)
+    reference = case.get("reference_target")
+    order = list(range(n_targets)) if reference is None else [reference] + [
+        t for t in range(n_targets) if t != reference]  # the star first: the others take its measurements
+    per_target = {}
+    for target in order:
+        log.info("target %d/%d", target + 1, n_targets)
         external = [ExternalCriterion(name, telemetry[f"{name}_nm"].values[target], False, "nm", long_name)
                     for name, long_name in EXTERNAL_CRITERIA if f"{name}_nm" in telemetry]
         if "lgs_residual_rms_nm" in telemetry:
             external.append(ExternalCriterion("true_rms", telemetry.true_rms_nm.values[target], False, "nm",
                                               "true corrected tilt-removed rms along the target (oracle)"))
-        per_target.append(run_lucky(
-            iter_frame_blocks(frames_path, target), n_frames, detectors, settings["fractions"],
+        image_reference = None if reference in (None, target) else ImageReference.of(per_target[reference])
+        if target in imaged:
+            frames = iter_frame_blocks(frames_path, target)
+        else:
+            frames = _replayed(case, telemetry, target, screens_path, screens_metadata_path)
+        per_target[target] = run_lucky(
+            frames, n_frames, detectors, settings["fractions"],
             float(telemetry.attrs["diffraction_limited_peak"]), pixel_scale, settings["seed"] + target,
-            criteria_external=external))
-    ds = xr.concat(per_target, dim="target", data_vars="all", coords="minimal", compat="override")
-    n_blocks = settings.get("error_blocks", 5)
+            criteria_external=external, reference=image_reference, n_blocks=n_blocks)
+    ds = xr.concat([per_target[t] for t in range(n_targets)], dim="target", data_vars="all", coords="minimal",
+                   compat="override")
+    ds["reference_target"] = ((), -1 if reference is None else reference, {
+        "units": "1", "long_name": "target whose frames give every target its image criteria and recentring "
+                                  "(-1: each target its own)"})
     errors = [batch_mean_error(telemetry.axis_strehl.values[t], n_blocks) for t in range(ds.sizes["target"])]
     ds["long_exposure_strehl_error"] = ("target", errors, {
         "units": "1", "long_name": f"Monte-Carlo standard error of the long-exposure Strehl (no recentring), "

@@ -16,7 +16,7 @@
 import numpy as np
 import xarray as xr
 
-from ..ao.correction import OpenLoopCorrection
+from ..ao.correction import DelayedDm, OpenLoopCorrection
 from ..atmosphere.screens import ScreenSet
 from ..optics.imaging import Imager
 from ..optics.propagation import Propagator
@@ -38,45 +38,89 @@ def lgs_chain(case: Case, screens: ScreenSet, reconstructors: np.ndarray,
     return sensor, LgsRmsEstimator(reconstructors, sensor.n_slopes)
 
 
+class SciencePath:
+    """Phase source -> correction -> imager and truth, for some of a case's targets.
+
+    ``targets``: indices into ``case.targets`` propagated (each gets its truth); ``imaged``:
+    indices into ``targets`` also imaged. :meth:`frame` computes one lucky frame.
+    """
+
+    def __init__(self, case: Case, screens: ScreenSet, targets, imaged):
+        self.imager = imager = Imager(case.telescope, case.camera)
+        self.targets, self.imaged = list(targets), list(imaged)
+        self.propagator = Propagator(list(case.layers), screens, [case.targets[t] for t in self.targets],
+                                     imager.grid, mask=imager.mask)
+        self.tilt = TiltRemover.for_mask(imager.grid, imager.mask)
+        self.to_camera = np.float32(REFERENCE_WAVELENGTH_M / case.camera.wavelength_m)
+        self.steps_per_frame = case.steps_per_frame
+        self._all_imaged = self.imaged == list(range(len(self.targets)))
+        self._intensity = np.empty((len(self.imaged), imager.fft_size, imager.fft_size), dtype=np.float32)
+
+    def surface(self, case: Case):
+        """The DM surface function at this path's pupil samples (the case must have AO)."""
+        return case.ao.deformable_mirror(case.telescope).grid_surface(self.imager.grid, self.imager.mask)
+
+    def frame(self, frame: int, steps: np.ndarray, layer_scales: np.ndarray, dm=None,
+              truth: bool = True) -> tuple[np.ndarray, np.ndarray | None]:
+        """The frame's unit-flux images (imaged, n, n) float32 (the mean of its steps' images)
+        and, with ``truth``, the tilt-removed rms (targets,) [rad at 500 nm] of its residual
+        phases; ``dm`` (anything with ``surface_at(step)``) corrects every step."""
+        self._intensity.fill(0.0)
+        rms2 = np.zeros(len(self.targets)) if truth else None
+        phases = self.propagator.sample_valid(steps, layer_scales)  # (k, n_targets, n_valid)
+        require_finite(phases, f"science phases of frame {frame}", "phase", ("step", "target", "sample"))
+        for step, phase_500 in zip(steps, phases):
+            if dm is not None:
+                phase_500 = phase_500 - dm.surface_at(int(step))
+            imaged = phase_500 if self._all_imaged else phase_500[self.imaged]
+            self.imager.accumulate(imaged * self.to_camera, self._intensity)
+            if truth:
+                rms2 += self.tilt.rms(phase_500) ** 2
+        images = self.imager.to_pixels(self._intensity / self.steps_per_frame)
+        return images, None if rms2 is None else np.sqrt(rms2 / self.steps_per_frame)
+
+
 def simulate(case: Case, screens: ScreenSet, write_frames, sensor: LgsSensor | None = None,
              estimator: LgsRmsEstimator | None = None, commands: tuple[np.ndarray, np.ndarray] | None = None,
-             block_frames: int = 32) -> xr.Dataset:
-    """Run the case; ``write_frames(start, frames (target, k, n, n))`` receives the
-    noiseless unit-flux frames. Returns the telemetry dataset. With an LGS
+             imaged_targets=None, block_frames: int = 32) -> xr.Dataset:
+    """Run the case; ``write_frames(start, frames (imaged target, k, n, n))`` receives the
+    noiseless unit-flux frames of ``imaged_targets`` (indices into ``case.targets``,
+    default all; every target gets its truth). Returns the telemetry dataset. With an LGS
     ``sensor`` and its ``estimator``, each frame also gets its ``lgs_rms_nm``;
     with ``commands`` (the command matrix and the DM slopes of the case's
     ``ao`` settings, :func:`luckyao.study.reconstructor.build_commands`) the DM
-    corrects every step and each frame gets its ``lgs_residual_rms_nm``.
+    corrects every step, each frame gets its ``lgs_residual_rms_nm`` and every
+    exposure's DM commands are recorded (``dm_commands_m``), so that the science path
+    of the targets not imaged can be replayed (:func:`replay_frames`).
 
-    Per frame it records the truth (tilt-removed rms) and the frame's value on
-    the optical axis over the diffraction-limited peak, whose mean over frames
+    Per frame it records the truth (tilt-removed rms) and the imaged targets' frame
+    value on the optical axis over the diffraction-limited peak, whose mean over frames
     is the long-exposure Strehl (no recentring): a plain mean, so its
     Monte-Carlo error follows from batch means.
     """
-    imager = Imager(case.telescope, case.camera)
-    mask = imager.mask
-    propagator = Propagator(list(case.layers), screens, list(case.targets), imager.grid, mask=mask)
-    tilt = TiltRemover.for_mask(imager.grid, mask)
+    n_targets, n_frames, spf = len(case.targets), case.n_frames, case.steps_per_frame
+    imaged = list(range(n_targets)) if imaged_targets is None else sorted(imaged_targets)
+    science = SciencePath(case, screens, range(n_targets), imaged)
+    imager = science.imager
     correction = None
     if commands is not None:
-        surface = case.ao.deformable_mirror(case.telescope).grid_surface(imager.grid, mask)
-        correction = OpenLoopCorrection(*commands, surface, sensor.exposure_steps, case.ao.delay_steps,
-                                        case.steps_per_frame)
-    n_targets, n_frames, spf = len(case.targets), case.n_frames, case.steps_per_frame
-    steps_max = propagator.n_steps_max if sensor is None else min(propagator.n_steps_max, sensor.n_steps_max)
+        correction = OpenLoopCorrection(*commands, science.surface(case), sensor.exposure_steps,
+                                        case.ao.delay_steps, spf)
+        dm_commands = np.empty((n_frames * spf // sensor.exposure_steps, correction.dm.n_actuators), np.float32)
+    steps_max = science.propagator.n_steps_max
+    if sensor is not None:
+        steps_max = min(steps_max, sensor.n_steps_max)
     if n_frames * spf > steps_max:
         raise ValueError(f"the screens hold {steps_max} steps, the case needs {n_frames * spf}")
-    to_camera = np.float32(REFERENCE_WAVELENGTH_M / case.camera.wavelength_m)
     n_pix = case.camera.n_pixels
 
     true_rms_nm = np.empty((n_targets, n_frames), dtype=np.float32)
     r0_frame = np.empty(n_frames)
-    axis_strehl = np.empty((n_targets, n_frames), dtype=np.float32)
+    axis_strehl = np.full((n_targets, n_frames), np.nan, dtype=np.float32)
     lgs_rms = np.full((n_targets, n_frames), np.nan, dtype=np.float32)
     lgs_residual_rms = np.full((n_targets, n_frames), np.nan, dtype=np.float32)
     progress = Progress("frames", n_frames)
-    buffer = np.empty((n_targets, block_frames, n_pix, n_pix), dtype=np.float32)
-    intensity = np.empty((n_targets, imager.fft_size, imager.fft_size), dtype=np.float32)
+    buffer = np.empty((len(imaged), block_frames, n_pix, n_pix), dtype=np.float32)
     for start in range(0, n_frames, block_frames):
         count = min(block_frames, n_frames - start)
         for j in range(count):
@@ -93,22 +137,13 @@ def simulate(case: Case, screens: ScreenSet, write_frames, sensor: LgsSensor | N
                 lgs_rms[:, frame] = lucky_frame_rms_nm(estimator.rms_nm(slopes))
                 if correction is not None:
                     for start_step, exposure in zip(starts, slopes):
-                        correction.measure(int(start_step), exposure)
+                        dm_commands[start_step // e] = correction.measure(int(start_step), exposure)
                     residual = np.stack([correction.residual_slopes(int(s), exposure)
                                          for s, exposure in zip(starts, slopes)])
                     lgs_residual_rms[:, frame] = lucky_frame_rms_nm(estimator.rms_nm(residual))
-            intensity.fill(0.0)  # phase source -> correction -> imager and truth
-            rms2 = np.zeros(n_targets)
-            phases = propagator.sample_valid(steps, layer_scales)  # (k, n_targets, n_valid)
-            require_finite(phases, f"science phases of frame {frame}", "phase", ("step", "target", "sample"))
-            for step, phase_500 in zip(steps, phases):
-                if correction is not None:
-                    phase_500 = phase_500 - correction.surface_at(int(step))
-                imager.accumulate(phase_500 * to_camera, intensity)
-                rms2 += tilt.rms(phase_500) ** 2
-            buffer[:, j] = imager.to_pixels(intensity / spf)
-            axis_strehl[:, frame] = buffer[:, j, n_pix // 2, n_pix // 2] / imager.diffraction_limited_peak
-            true_rms_nm[:, frame] = phase_rad_to_nm(np.sqrt(rms2 / spf), REFERENCE_WAVELENGTH_M)
+            buffer[:, j], rms = science.frame(frame, steps, layer_scales, correction)
+            axis_strehl[imaged, frame] = buffer[:, j, n_pix // 2, n_pix // 2] / imager.diffraction_limited_peak
+            true_rms_nm[:, frame] = phase_rad_to_nm(rms, REFERENCE_WAVELENGTH_M)
             r0_frame[frame] = np.mean(case.r0.r0_m(steps * case.time_step_s))
         write_frames(start, buffer[:, :count])
         progress.update(start + count)
@@ -123,6 +158,9 @@ def simulate(case: Case, screens: ScreenSet, write_frames, sensor: LgsSensor | N
         extra["lgs_residual_rms_nm"] = (("target", "frame"), lgs_residual_rms, {
             "units": "nm", "long_name": "tilt-removed rms of the LGS pseudo-closed-loop reconstruction (open-loop "
             "slopes less the DM's) along the target, over the frame's WFS exposures"})
+        extra["dm_commands_m"] = (("exposure", "actuator"), dm_commands, {
+            "units": "m", "long_name": "DM commands of each WFS exposure (applied from delay_steps after its "
+            "start), valid actuators"})
     return xr.Dataset(
         {
             **extra,
@@ -132,7 +170,7 @@ def simulate(case: Case, screens: ScreenSet, write_frames, sensor: LgsSensor | N
             "r0_500nm_m": (("frame",), r0_frame, {"units": "m", "long_name": "Fried parameter at 500 nm"}),
             "axis_strehl": (("target", "frame"), axis_strehl,
                             {"units": "1", "long_name": "frame value on the optical axis over the "
-                             "diffraction-limited peak"}),
+                             "diffraction-limited peak (NaN: target not imaged by the simulation)"}),
         },
         coords={
             "time_s": (("frame",), np.arange(n_frames) * frame_time,
@@ -141,7 +179,38 @@ def simulate(case: Case, screens: ScreenSet, write_frames, sensor: LgsSensor | N
                                 {"units": "arcsec", "long_name": "target x direction"}),
             "target_y_arcsec": (("target",), [t.theta_y_rad / ARCSEC_RAD for t in case.targets],
                                 {"units": "arcsec", "long_name": "target y direction"}),
+            "imaged": (("target",), np.isin(np.arange(n_targets), imaged).astype(np.int8),
+                       {"units": "1", "long_name": "target imaged (frames written) by the simulation"}),
         },
         attrs={"diffraction_limited_peak": imager.diffraction_limited_peak,
                "pupil_samples": imager.grid.n_pix, "pupil_sample_m": imager.grid.dx_m},
     )
+
+
+def replay_frames(case: Case, screens: ScreenSet, targets, dm_commands_m: np.ndarray | None,
+                  exposure_steps: int, block_frames: int = 64):
+    """Callable returning an iterator of ``(start, frames (target, k, n, n))``: the science
+    path of ``targets`` (indices into ``case.targets``) replayed frame by frame, corrected
+    by the recorded DM commands (``dm_commands_m`` (exposure, actuator) of
+    :func:`simulate`, None without AO). Recomputing these frames is as fast as simulating
+    them and stores nothing: the frames of a field case's off-axis targets are made
+    where they are used (post-processing), not kept on disk."""
+    spf = case.steps_per_frame
+
+    def iterate():
+        science = SciencePath(case, screens, targets, range(len(targets)))
+        dm = None
+        if dm_commands_m is not None:
+            dm = DelayedDm(science.surface(case), exposure_steps, case.ao.delay_steps, spf)
+        block = np.empty((len(targets), block_frames) + (case.camera.n_pixels,) * 2, dtype=np.float32)
+        for start in range(0, case.n_frames, block_frames):
+            count = min(block_frames, case.n_frames - start)
+            for j in range(count):
+                steps = (start + j) * spf + np.arange(spf)
+                if dm is not None:
+                    for step in steps[::exposure_steps]:
+                        dm.apply(int(step), dm_commands_m[step // exposure_steps])
+                block[:, j], _ = science.frame(start + j, steps, case.layer_scales(steps), dm, truth=False)
+            yield start, block[:, :count].copy()
+
+    return iterate

@@ -1,0 +1,492 @@
+"""Compiled kernels of lucky imaging: keyed random streams, detector noise with the
+per-frame sums fused, binned encircled energy and recentred accumulation.
+
+Random streams (:func:`detect_frames`): every frame has its own, keyed by
+``(seed, key, frame index)`` through splitmix64 (Steele, Lea & Flood 2014) into the
+states of xoshiro256++ generators (Blackman & Vigna 2021): ``LANES`` interleaved
+ones for the Gaussian read noise (a lane loop that vectorises) and one for the rest
+(photons, the ziggurat's rare slow path). A frame's draws therefore depend on the
+seed, the detector's key and the frame's index only: not on the chunking, the other
+frames or the other detectors.
+
+Gaussian deviates: the ziggurat method (Marsaglia & Tsang 2000) with 256 layers and
+23-bit magnitudes in float32, numpy's ``standard_normal(dtype=float32)`` algorithm:
+the rectangle test runs for all pixels in a vectorised loop, the rare rest
+(wedges and the tail) per deviate.
+
+Poisson photon counts, exact, in one of two ways (both are the same Poisson process):
+few photons (``N sum I < n^2 / SEARCH_PER_PIXEL``): the total ``K ~ Poisson(N sum I)``,
+each photon placed by inverse-CDF search on the frame's cumulative sum (float64);
+otherwise pixel by pixel: ``Poisson(lambda)`` drawn directly where ``lambda = N I >=
+BRIGHT`` (inversion below 10, Hörmann's PTRS above), and the other pixels laid end to
+end on a line where the photons are the arrivals of a unit-rate Poisson process
+(exponential gaps), so a pixel of mean ``lambda`` gets ``Poisson(lambda)`` independently
+of the others (a Poisson process on disjoint intervals).
+"""
+
+import math
+
+import numba
+import numpy as np
+
+LANES = 8
+"""Interleaved xoshiro256++ generators of the Gaussian deviates (one vector loop)."""
+
+SEARCH_PER_PIXEL = 10
+"""Photons are placed by search when a frame expects fewer than n^2 / this (a search
+costs ~10 times a pixel of the pixel-by-pixel way)."""
+
+BRIGHT = 1.0
+"""Pixels of mean >= this get their own Poisson draw (in the pixel-by-pixel way)."""
+
+_GOLDEN = np.uint64(0x9E3779B97F4A7C15)
+_M1 = np.uint64(0xBF58476D1CE4E5B9)
+_M2 = np.uint64(0x94D049BB133111EB)
+_FALLBACK = np.uint64(4 * LANES)  # splitmix index of the scalar generator's state
+
+
+def _ziggurat_tables():
+    """256-layer ziggurat for float32 with 23-bit magnitudes: ``(k, w, f)``: accept
+    ``m < k[i]``, deviate ``m w[i]``, ``f[i] = exp(-x_i^2 / 2)`` (Marsaglia & Tsang 2000)."""
+    m1 = 2.0**23
+    dn = tn = 3.6541528853610088
+    vn = 4.92867323399e-3
+    k, w, f = np.zeros(256, np.uint32), np.zeros(256), np.zeros(256)
+    q = vn / math.exp(-0.5 * dn * dn)
+    k[0], k[1] = int(dn / q * m1), 0
+    w[0], w[255] = q / m1, dn / m1
+    f[0], f[255] = 1.0, math.exp(-0.5 * dn * dn)
+    for i in range(254, 0, -1):
+        dn = math.sqrt(-2.0 * math.log(vn / dn + math.exp(-0.5 * dn * dn)))
+        k[i + 1] = int(dn / tn * m1)
+        tn = dn
+        f[i] = math.exp(-0.5 * dn * dn)
+        w[i] = dn / m1
+    return k, w.astype(np.float32), f.astype(np.float32)
+
+
+_ZK, _ZW, _ZF = _ziggurat_tables()
+_ZK32 = _ZK.astype(np.int32)  # < 2^23
+_ZR = np.float64(3.6541528853610088)  # the tail's start
+
+
+@numba.njit(inline="always")
+def _mix(z):  # pragma: no cover (jit)
+    """splitmix64's output function of ``z + golden``."""
+    z = z + _GOLDEN
+    z = (z ^ (z >> np.uint64(30))) * _M1
+    z = (z ^ (z >> np.uint64(27))) * _M2
+    return z ^ (z >> np.uint64(31))
+
+
+@numba.njit(inline="always")
+def _rotl(x, k):  # pragma: no cover (jit)
+    return (x << np.uint64(k)) | (x >> np.uint64(64 - k))
+
+
+@numba.njit(cache=True, nogil=True)
+def stream_key(seed, key, frame):  # pragma: no cover (jit)
+    """The 64-bit key of a frame's streams from (seed, key, frame index), each < 2^63."""
+    return _mix(_mix(_mix(np.uint64(seed)) ^ np.uint64(key)) ^ np.uint64(frame))
+
+
+@numba.njit(cache=True, nogil=True)
+def _seed(h, lanes, scalar):  # pragma: no cover (jit)
+    """States (4, LANES) and (4,) from the 64-bit key ``h`` (splitmix64 sequence)."""
+    for j in range(4):
+        for lane in range(LANES):
+            lanes[j, lane] = _mix(h + np.uint64(j * LANES + lane) * _GOLDEN)
+        scalar[j] = _mix(h + (_FALLBACK + np.uint64(j)) * _GOLDEN)
+
+
+@numba.njit(inline="always")
+def _next(s):  # pragma: no cover (jit)
+    """xoshiro256++ step of the scalar state ``s`` (4,): a uint64."""
+    a, b, c, d = s[0], s[1], s[2], s[3]
+    out = _rotl(a + d, 23) + a
+    t = b << np.uint64(17)
+    c ^= a
+    d ^= b
+    b ^= c
+    a ^= d
+    c ^= t
+    d = _rotl(d, 45)
+    s[0], s[1], s[2], s[3] = a, b, c, d
+    return out
+
+
+@numba.njit(inline="always")
+def _uniform(s):  # pragma: no cover (jit)
+    """Uniform float64 in (0, 1): 53 bits, offset by half a step."""
+    return (np.float64(_next(s) >> np.uint64(11)) + 0.5) * (1.0 / 9007199254740992.0)
+
+
+@numba.njit(cache=True, nogil=True, fastmath={"contract"})
+def _fill_bits(lanes, out):  # pragma: no cover (jit)
+    """``out`` (m,) uint64, m a multiple of LANES, from the interleaved generators."""
+    s0, s1, s2, s3 = lanes[0], lanes[1], lanes[2], lanes[3]
+    for i in range(0, out.size, LANES):
+        for lane in range(LANES):
+            a, b, c, d = s0[lane], s1[lane], s2[lane], s3[lane]
+            out[i + lane] = _rotl(a + d, 23) + a
+            t = b << np.uint64(17)
+            c ^= a
+            d ^= b
+            b ^= c
+            a ^= d
+            c ^= t
+            s0[lane], s1[lane], s2[lane], s3[lane] = a, b, c, _rotl(d, 45)
+
+
+@numba.njit(nogil=True)
+def _normal_slow(idx, x, s):  # pragma: no cover (jit)
+    """The ziggurat after a failed rectangle test of layer ``idx`` with deviate ``x``:
+    the wedge or tail test with fresh uniforms of ``s``, then, if rejected, new tries."""
+    idx = np.int64(idx)
+    while True:
+        if idx == 0:  # the tail beyond r (Marsaglia 1964)
+            while True:
+                xx = -math.log(_uniform(s)) / _ZR
+                yy = -math.log(_uniform(s))
+                if yy + yy > xx * xx:
+                    return np.float32(-(_ZR + xx) if x < 0 else _ZR + xx)
+        fx = np.float64(_ZF[idx]) + _uniform(s) * (np.float64(_ZF[idx - 1]) - np.float64(_ZF[idx]))
+        if fx < math.exp(-0.5 * np.float64(x) * np.float64(x)):
+            return x
+        while True:  # a new try
+            r = np.int64(_next(s) >> np.uint64(32))
+            idx = r & 0xFF
+            m = (r >> 9) & 0x7FFFFF
+            x = np.float32(m) * _ZW[idx]
+            if (r >> 8) & 1:
+                x = -x
+            if m < _ZK32[idx]:
+                return x
+            break
+
+
+@numba.njit(cache=True, nogil=True, fastmath={"contract"})
+def _normals(bits32, out, s):  # pragma: no cover (jit)
+    """Standard normal float32 ``out`` (m,) from 32-bit words ``bits32`` (m,), m a multiple
+    of 32: bits 0-7 the layer, 8 the sign, 9-31 the magnitude; the rectangle test for all
+    (vector loop, int32 arithmetic), the rest per deviate with the generator ``s``."""
+    block = 32
+    for start in range(0, out.size, block):
+        failed = 0
+        for i in range(start, start + block):
+            r = np.int32(bits32[i])
+            idx = r & 0xFF
+            m = (r >> 9) & 0x7FFFFF
+            x = np.float32(m) * _ZW[idx]
+            out[i] = x - np.float32(2 * ((r >> 8) & 1)) * x
+            failed += m >= _ZK32[idx]
+        if failed:
+            for i in range(start, start + block):
+                r = np.int32(bits32[i])
+                idx = r & 0xFF
+                if ((r >> 9) & 0x7FFFFF) >= _ZK32[idx]:
+                    out[i] = _normal_slow(idx, out[i], s)
+
+
+@numba.njit(nogil=True)
+def _poisson(lam, s):  # pragma: no cover (jit)
+    """Poisson(lam) deviate: inversion below 10, PTRS (Hörmann 1993) above (as numpy)."""
+    if lam < 10.0:
+        p = math.exp(-lam)
+        u = _uniform(s)
+        k = 0
+        cdf = p
+        while u > cdf and p > 0.0:
+            k += 1
+            p *= lam / k
+            cdf += p
+        return k
+    slam = math.sqrt(lam)
+    loglam = math.log(lam)
+    b = 0.931 + 2.53 * slam
+    a = -0.059 + 0.02483 * b
+    invalpha = 1.1239 + 1.1328 / (b - 3.4)
+    vr = 0.9277 - 3.6224 / (b - 2.0)
+    while True:
+        u = _uniform(s) - 0.5
+        v = _uniform(s)
+        us = 0.5 - abs(u)
+        k = math.floor((2.0 * a / us + b) * u + lam + 0.43)
+        if us >= 0.07 and v <= vr:
+            return int(k)
+        if k < 0 or (us < 0.013 and v > us):
+            continue
+        if (math.log(v) + math.log(invalpha) - math.log(a / (us * us) + b)
+                <= -lam + k * loglam - math.lgamma(k + 1.0)):
+            return int(k)
+
+
+@numba.njit(cache=True, nogil=True)
+def cumulative(unit, within, rows):  # pragma: no cover (jit)
+    """Cumulative sums of the positive pixels of frames ``unit`` (k, n, n), float64: along
+    each row, ``within`` (k, n, n), and of the row totals, ``rows`` (k, n). Four rows at a
+    time (independent sums)."""
+    k, n, _ = unit.shape
+    for j in range(k):
+        for y0 in range(0, n - n % 4, 4):
+            a0 = a1 = a2 = a3 = 0.0
+            for x in range(n):
+                a0 += max(np.float64(unit[j, y0, x]), 0.0)
+                a1 += max(np.float64(unit[j, y0 + 1, x]), 0.0)
+                a2 += max(np.float64(unit[j, y0 + 2, x]), 0.0)
+                a3 += max(np.float64(unit[j, y0 + 3, x]), 0.0)
+                within[j, y0, x], within[j, y0 + 1, x] = a0, a1
+                within[j, y0 + 2, x], within[j, y0 + 3, x] = a2, a3
+        for y in range(n - n % 4, n):
+            a = 0.0
+            for x in range(n):
+                a += max(np.float64(unit[j, y, x]), 0.0)
+                within[j, y, x] = a
+        total = 0.0
+        for y in range(n):
+            total += within[j, y, n - 1]
+            rows[j, y] = total
+
+
+@numba.njit(inline="always")
+def _first_above(cumulative, u):  # pragma: no cover (jit)
+    """First index whose value in the non-decreasing ``cumulative`` exceeds ``u`` (bisection;
+    the last index if none)."""
+    lo, hi = 0, cumulative.shape[0] - 1
+    while lo < hi:
+        mid = (lo + hi) >> 1
+        if cumulative[mid] > u:
+            hi = mid
+        else:
+            lo = mid + 1
+    return lo
+
+
+@numba.njit(nogil=True)
+def _place(within, rows, photons, out, s):  # pragma: no cover (jit)
+    """Add Poisson counts of means ``photons I`` to ``out`` (n, n), ``I`` the frame of the
+    cumulative sums ``within`` (n, n) and ``rows`` (n,) (:func:`cumulative`): ``K ~
+    Poisson(photons sum I)`` photons, each at the first row whose cumulative total exceeds
+    ``u sum I``, then the first pixel of it whose cumulative sum exceeds the rest (the last
+    positive one if rounding leaves none)."""
+    n = within.shape[0]
+    total = rows[n - 1]
+    if not total > 0:
+        return
+    top = np.nextafter(total, 0.0)
+    for _ in range(_poisson(photons * total, s)):
+        u = min(_uniform(s) * total, top)
+        y = _first_above(rows, u)
+        if y > 0:
+            u -= rows[y - 1]
+        row = within[y]
+        lo = _first_above(row, u)
+        while lo > 0 and row[lo] == row[lo - 1]:
+            lo -= 1  # only if rounding left u at the row's end: back to a positive pixel
+        out[y, lo] += 1.0
+
+
+@numba.njit(nogil=True)
+def _per_pixel(unit, photons, out, s):  # pragma: no cover (jit)
+    """Add Poisson counts of means ``photons unit`` (n, n) to ``out`` pixel by pixel:
+    own draws where the mean is >= BRIGHT, unit-rate arrivals along the others."""
+    n = unit.shape[0]
+    gap = -math.log(_uniform(s))  # to the next arrival
+    for y in range(n):
+        for x in range(n):
+            v = unit[y, x]
+            if not v > 0:
+                continue
+            lam = photons * np.float64(v)
+            if lam >= BRIGHT:
+                out[y, x] += _poisson(lam, s)
+                continue
+            if gap > lam:
+                gap -= lam
+                continue
+            count = 0
+            while gap <= lam:
+                lam -= gap
+                count += 1
+                gap = -math.log(_uniform(s))
+            gap -= lam
+            out[y, x] += count
+
+
+@numba.njit(cache=True, nogil=True, fastmath=True)
+def _finish(out, normals, sigma, rows, cols):  # pragma: no cover (jit)
+    """``out += sigma normals`` (if sigma > 0), then row and column sums (float64, in
+    any order) and the peak of the frame ``out`` (n, n) (finite values)."""
+    n = out.shape[0]
+    peak = np.float32(-np.inf)
+    cols[:] = 0.0
+    for y in range(n):
+        o = out[y]
+        if sigma > 0:
+            g = normals[y * n: (y + 1) * n]
+            for x in range(n):
+                o[x] += sigma * g[x]
+        row = 0.0
+        for x in range(n):
+            v = o[x]
+            row += v
+            cols[x] += v
+            peak = max(peak, v)
+        rows[y] = row
+    return peak
+
+
+@numba.njit(cache=True, nogil=True)
+def detect_frames(unit, within, row_cumulative, photons, sigma, seed, key, first_frame, out, rows, cols,
+                  peak, bits, normals):  # pragma: no cover (jit)
+    """Detected frames ``out`` (k, n, n) float32 of unit-flux frames ``unit`` (k, n, n)
+    (negative values count as 0) of cumulative sums ``within``, ``row_cumulative``
+    (:func:`cumulative`), photons per frame ``photons``, read noise ``sigma`` (float32):
+    frame ``j``'s streams are keyed by (seed, key, first_frame + j). Also per frame: row
+    and column sums ``rows``, ``cols`` (k, n) float64 and the peak ``peak`` (k,). Work
+    arrays: ``bits`` (n^2 / 2,) uint64, ``normals`` (n^2,) float32."""
+    k, n, _ = unit.shape
+    lanes = np.empty((4, LANES), np.uint64)
+    s = np.empty(4, np.uint64)
+    bits32 = bits.view(np.uint32)
+    for j in range(k):
+        _seed(stream_key(seed, key, first_frame + j), lanes, s)
+        frame = out[j]
+        frame[:] = 0.0
+        if sigma > 0:
+            _fill_bits(lanes, bits)
+            _normals(bits32, normals, s)
+        if photons * row_cumulative[j, n - 1] < n * n / SEARCH_PER_PIXEL:
+            _place(within[j], row_cumulative[j], photons, frame, s)
+        else:
+            _per_pixel(unit[j], photons, frame, s)
+        peak[j] = _finish(frame, normals, sigma, rows[j], cols[j])
+
+
+@numba.njit(cache=True, nogil=True)
+def add_recentred(frames, shifts, rows, partial):  # pragma: no cover (jit)
+    """``partial[r] += roll(frames[j], shifts[j])`` (float64) for every ``r = rows[j, c] >= 0``.
+
+    ``frames`` (k, n, n) float32, ``shifts`` (k, 2) int64 (y, x) with ``np.roll``
+    semantics, ``rows`` (k, m) int64, ``partial`` (R, >= n^2) float64, image ``r`` in
+    ``partial[r, :n^2]`` (row-major; a row length other than a power of two keeps the
+    images' rows in distinct cache sets). Output-row major: the partial rows of a few image
+    rows stay in cache over the chunk's frames, ``tile`` image rows at a time (a frame's
+    rows read in runs).
+    """
+    k, n, _ = frames.shape
+    tile = 4
+    for y0 in range(0, n, tile):
+        for j in range(k):
+            sx = shifts[j, 1] % n
+            for y in range(y0, min(y0 + tile, n)):
+                src = frames[j, (y - shifts[j, 0]) % n]
+                o = y * n
+                for c in range(rows.shape[1]):
+                    r = rows[j, c]
+                    if r < 0:
+                        continue
+                    dst = partial[r, o:o + n]
+                    for x in range(sx, n):
+                        dst[x] += src[x - sx]
+                    for x in range(sx):
+                        dst[x] += src[x + n - sx]
+
+
+@numba.njit(cache=True, nogil=True)
+def add_frames(frames, total):  # pragma: no cover (jit)
+    """``total += sum_j frames[j]`` (float64) of frames (k, n, n) float32."""
+    k, n, _ = frames.shape
+    for y in range(n):
+        for j in range(k):
+            src = frames[j, y]
+            dst = total[y]
+            for x in range(n):
+                dst[x] += src[x]
+
+
+@numba.njit(cache=True, nogil=True, fastmath={"contract"})
+def radial_energy(spectrum, centre, fy, fx, row_end, bin_of, weight, out):  # pragma: no cover (jit)
+    """``out[b] = sum_k weight_k Re(S_k exp(2 pi i f_k.c))`` over the kept half-plane
+    frequencies ``k`` of radial bin ``b``. ``spectrum`` (n, n/2 + 1) complex64 (rfft2);
+    row ``ky`` keeps columns ``0..row_end[ky] - 1`` whose bins are ``bin_of[ky, :]`` and
+    weights ``weight[ky, :]`` (float64); ``fy`` (n,), ``fx`` (n/2+1,) [cycles/pixel]."""
+    out[:] = 0.0
+    m = fx.size
+    px_re = np.empty(m)
+    px_im = np.empty(m)
+    for x in range(m):
+        a = 2 * np.pi * centre[1] * fx[x]
+        px_re[x] = math.cos(a)
+        px_im[x] = math.sin(a)
+    for y in range(spectrum.shape[0]):
+        a = 2 * np.pi * centre[0] * fy[y]
+        cy, sy = math.cos(a), math.sin(a)
+        for x in range(row_end[y]):
+            z = spectrum[y, x]
+            pr = cy * px_re[x] - sy * px_im[x]
+            pi = cy * px_im[x] + sy * px_re[x]
+            out[bin_of[y, x]] += weight[y, x] * (z.real * pr - z.imag * pi)
+
+
+@numba.njit(cache=True, nogil=True)
+def component(values, threshold, y0, x0, inside):  # pragma: no cover (jit)
+    """The 4-connected component of ``values >= threshold`` (m, n) holding ``(y0, x0)``
+    (which must qualify) as ``inside`` (m, n) bool, as ``scipy.ndimage.label``'s default
+    structure labels it. Returns (pixels, first row, last row, first column, last column)."""
+    m, n = values.shape
+    inside[:] = False
+    stack = np.empty(m * n, np.int64)
+    stack[0] = y0 * n + x0
+    inside[y0, x0] = True
+    top = 1
+    count = 0
+    r0, r1, c0, c1 = y0, y0, x0, x0
+    while top:
+        top -= 1
+        p = stack[top]
+        y, x = p // n, p % n
+        count += 1
+        r0, r1, c0, c1 = min(r0, y), max(r1, y), min(c0, x), max(c1, x)
+        for dy, dx in ((-1, 0), (1, 0), (0, -1), (0, 1)):
+            yy, xx = y + dy, x + dx
+            if 0 <= yy < m and 0 <= xx < n and not inside[yy, xx] and values[yy, xx] >= threshold:
+                inside[yy, xx] = True
+                stack[top] = yy * n + xx
+                top += 1
+    return count, r0, r1, c0, c1
+
+
+@numba.njit(cache=True, nogil=True)
+def dilate(inside, out):  # pragma: no cover (jit)
+    """``out`` = binary dilation of ``inside`` (m, n) bool by the 3 x 3 square (as
+    ``scipy.ndimage.binary_dilation`` with ``structure=np.ones((3, 3))``, outside False)."""
+    m, n = inside.shape
+    out[:] = False
+    for y in range(m):
+        for x in range(n):
+            if inside[y, x]:
+                for yy in range(max(y - 1, 0), min(y + 2, m)):
+                    for xx in range(max(x - 1, 0), min(x + 2, n)):
+                        out[yy, xx] = True
+
+
+@numba.njit(cache=True, nogil=True)
+def dirichlet(j, up, table, out):  # pragma: no cover (jit)
+    """``out[p, y'] = Re D(j_p / up - y')`` (len(j), n), ``D`` the Dirichlet kernel of
+    ``metrics._dirichlet``: ``(-1)^y' sin(pi y_p) table[(j_p - up y') mod len(table)]``,
+    ``table[m]`` = ``cot`` (even n) or ``1 / sin`` (odd n) of ``pi m / (up n)``; on whole
+    pixels (``j_p`` a multiple of ``up``) n at ``y' = y_p mod n``, else 0."""
+    n = out.shape[1]
+    period = table.size
+    for p in range(j.size):
+        jp = j[p]
+        row = out[p]
+        if jp % up == 0:
+            row[:] = 0.0
+            row[(jp // up) % n] = n
+            continue
+        s = math.sin(math.pi * ((jp % (2 * up)) / up))
+        for y in range(n):
+            v = s * table[(jp - up * y) % period]
+            row[y] = -v if y % 2 else v

@@ -1,0 +1,192 @@
+"""Archived reproducibility runs on the tiny study: ``luckyao archive`` holds the config,
+results, figures, versions and checksums; ``luckyao verify`` checks them and reruns a case,
+and fails naming the member, or the file and variable, when anything differs."""
+
+import hashlib
+import io
+import json
+import subprocess
+import sys
+from contextlib import redirect_stdout
+from pathlib import Path
+
+import numpy as np
+import pytest
+import xarray as xr
+import yaml
+
+from luckyao.study.archive import (
+    CHECKSUMS,
+    checksum_list,
+    compare_variables,
+    read_members,
+    runtime_packages,
+    write_members,
+)
+from luckyao.study.cli import main
+from luckyao.study.config import validate_study
+
+REPO = Path(__file__).resolve().parents[1]
+TINY = REPO / "tests" / "data" / "tiny.yaml"
+
+
+def no_lgs_study() -> dict:
+    """The tiny study cut to its cases without LGS and the figures of only those (the cheapest
+    jobs: the archive and verify do not depend on what the cases model)."""
+    study = yaml.safe_load(TINY.read_text())
+    cheap = {name for name, case in validate_study(study).items() if not case["lgs"]["enabled"]}
+    study["figures"] = {fig: f for fig, f in study["figures"].items() if set(f["cases"]) <= cheap}
+    shown = {case for f in study["figures"].values() for case in f["cases"]}
+    study["cases"] = {name: case for name, case in study["cases"].items() if name in shown}
+    assert study["figures"] and study["cases"]
+    return study
+
+
+@pytest.fixture(scope="module")
+def study(tmp_path_factory):
+    """A finished run of ``no_lgs_study`` (about 30 s)."""
+    workdir = tmp_path_factory.mktemp("study")
+    (workdir / "config").mkdir()
+    (workdir / "config" / "config.yaml").write_text(yaml.safe_dump(no_lgs_study()))
+    command = [sys.executable, "-m", "snakemake", "-s", str(REPO / "Snakefile"), "-d", str(workdir), "--cores", "2"]
+    result = subprocess.run(command, capture_output=True, text=True, timeout=600)
+    assert result.returncode == 0, result.stderr[-3000:]
+    return workdir
+
+
+@pytest.fixture(scope="module")
+def archive(study):
+    path = study / "run.tar"
+    assert main(["archive", "--study-dir", str(study), "--out", str(path)]) == 0
+    return path
+
+
+@pytest.fixture(scope="module")
+def verified(archive, tmp_path_factory):
+    """``verify`` of the untouched archive, rerunning case ``good`` in a kept folder: (exit
+    code, output, folder). Later tests reuse the finished rerun there (Snakemake reruns nothing)."""
+    workdir = tmp_path_factory.mktemp("rerun")
+    output = io.StringIO()
+    with redirect_stdout(output):
+        code = main(["verify", str(archive), "--case", "good", "--workdir", str(workdir)])
+    return code, output.getvalue(), workdir
+
+
+def verify(capsys, *args) -> tuple[int, str]:
+    code = main(["verify", *map(str, args)])
+    captured = capsys.readouterr()
+    return code, captured.out + captured.err
+
+
+def rewritten(archive: Path, path: Path, changes: dict[str, bytes], update_checksums: bool) -> Path:
+    """A copy of ``archive`` with members replaced, and ``SHA256SUMS`` updated or left as archived."""
+    members = read_members(archive) | changes
+    if update_checksums:
+        members[CHECKSUMS] = checksum_list(members)
+    write_members(path, members)
+    return path
+
+
+def test_archive_holds_config_results_figures_versions_and_checksums(study, archive):
+    members = read_members(archive)
+    study_config = yaml.safe_load((study / "config" / "config.yaml").read_text())
+    assert yaml.safe_load(members["config.yaml"]) == study_config
+    for case in study_config["cases"]:
+        assert {f"results/cases/{case}/lucky.nc", f"results/cases/{case}/telemetry.nc",
+                f"results/benchmarks/simulate/{case}.tsv"} <= set(members)
+    for fig in study_config["figures"]:
+        assert {f"figures/{fig}.nc", f"figures/{fig}.png", f"figures/{fig}.pdf"} <= set(members)
+    assert not any(name.endswith(("frames.nc", ".npy")) for name in members)
+    manifest = json.loads(members["MANIFEST.json"])
+    assert manifest["packages"]["numpy"] == np.__version__ and "luckyao" not in manifest["packages"]
+    assert manifest["git_commit"] and manifest["code_version"] and manifest["python"]
+    assert set(manifest["cases"]) == set(study_config["cases"])
+    listed = dict(line.split("  ")[::-1] for line in members[CHECKSUMS].decode().splitlines())
+    assert set(listed) == set(members) - {CHECKSUMS}
+    assert all(hashlib.sha256(members[name]).hexdigest() == digest for name, digest in listed.items())
+
+
+def test_verify_passes_with_an_identical_rerun(verified):
+    code, output, _ = verified
+    assert code == 0, output
+    assert "verify: OK" in output
+    assert "results/cases/good/lucky.nc: strehl: identical" in output
+    assert "results/cases/good/telemetry.nc: axis_strehl: identical" in output
+
+
+def test_verify_fails_naming_a_changed_or_missing_member(archive, tmp_path, capsys):
+    members = read_members(archive)
+    figure = next(name for name in members if name.startswith("figures/") and name.endswith(".nc"))
+    tampered = bytearray(members[figure])
+    tampered[-100] ^= 0xFF
+    code, output = verify(capsys, rewritten(archive, tmp_path / "a.tar", {figure: bytes(tampered)}, False))
+    assert code == 1 and f"{figure}: checksum differs" in output and "not rerun" in output
+    members.pop("results/cases/bad/telemetry.nc")
+    write_members(tmp_path / "b.tar", members)
+    code, output = verify(capsys, tmp_path / "b.tar")
+    assert code == 1 and "results/cases/bad/telemetry.nc: missing" in output
+
+
+def test_verify_fails_naming_file_and_variable_when_a_result_differs(archive, verified, tmp_path, capsys):
+    """An archived Strehl changed by 1e-5 (relative), its checksum updated: the checksums
+    pass and the rerun comparison fails naming the file and the variable; ``--rtol 1e-4``
+    accepts it."""
+    _, _, workdir = verified
+    member = "results/cases/good/lucky.nc"
+    original = tmp_path / "lucky.nc"
+    original.write_bytes(read_members(archive)[member])
+    with xr.open_dataset(original) as ds:
+        changed = ds.load()
+    strehl = changed["strehl"].values
+    strehl.flat[np.flatnonzero(np.isfinite(strehl) & (strehl > 0))[0]] *= 1 + 1e-5
+    changed.to_netcdf(tmp_path / "changed.nc")
+    path = rewritten(archive, tmp_path / "c.tar", {member: (tmp_path / "changed.nc").read_bytes()}, True)
+    code, output = verify(capsys, path, "--case", "good", "--workdir", workdir)
+    assert code == 1, output
+    assert "checksums: all" in output
+    assert f"FAILED: {member}: strehl: max abs diff" in output and "DIFFERS" in output
+    assert f"{member}: fwhm_arcsec: identical" in output
+    code, output = verify(capsys, path, "--case", "good", "--workdir", workdir, "--rtol", "1e-4")
+    assert code == 0, output
+    assert f"{member}: strehl: max abs diff" in output and "within rtol=0.0001" in output
+
+
+def test_verify_warns_when_the_environment_differs(archive, tmp_path, capsys):
+    lock = read_members(archive)["requirements.lock"].decode().replace(f"numpy=={np.__version__}", "numpy==1.0")
+    path = rewritten(archive, tmp_path / "d.tar", {"requirements.lock": lock.encode()}, True)
+    code, output = verify(capsys, path, "--no-rerun")
+    assert code == 0, output
+    assert f"warning: environment differs: numpy 1.0 archived, {np.__version__} here" in output
+
+
+def test_archive_refuses_results_of_another_config(study, tmp_path, capsys):
+    """Archiving with an overlay the study did not run with names the files it did not make."""
+    overlay = tmp_path / "overlay.yaml"
+    overlay.write_text("cases: {good: {atmosphere: {r0_500nm_m: 0.3}}}\n")
+    code = main(["archive", "--study-dir", str(study), "--configfile", str(overlay), "--out", str(tmp_path / "x.tar")])
+    assert code == 1
+    assert "results/cases/good/lucky.nc: made from another config" in capsys.readouterr().err
+    assert not (tmp_path / "x.tar").exists()
+
+
+def test_requirements_lock_pins_every_runtime_dependency():
+    """``requirements.lock`` pins exactly the runtime packages (names; versions may move on)."""
+    pins = [line for line in (REPO / "requirements.lock").read_text().splitlines() if not line.startswith("#")]
+    assert all(line.count("==") == 1 for line in pins)
+    names = {line.split("==")[0] for line in pins}
+    assert names == set(runtime_packages())
+    assert {"numpy", "xarray", "snakemake"} <= names and not {"luckyao", "pytest"} & names
+
+
+def test_compare_states_agreement_per_variable():
+    archived = xr.Dataset({"a": ("x", [1.0, np.nan]), "b": ("x", [1.0, 2.0]), "c": ("x", [1, 2]),
+                           "gone": ((), 0.0)}, coords={"x": ["p", "q"]}, attrs={"seed": 1})
+    fresh = xr.Dataset({"a": ("x", [1.0, np.nan]), "b": ("x", [1.0, 2.002]), "c": ("x", [1, 3]),
+                        "new": ((), 0.0)}, coords={"x": ["p", "r"]}, attrs={"seed": 1})
+    rows = {name: (agrees, how) for name, agrees, how in compare_variables(fresh, archived, 1e-2, 0.0)}
+    assert rows["a"] == (True, "identical") and rows["attribute seed"] == (True, "identical")
+    assert rows["b"][0] and "max abs diff 0.002, max rel diff 0.001: within rtol=0.01" in rows["b"][1]
+    assert rows["c"] == (False, "max abs diff 1, max rel diff 0.5: DIFFERS")
+    assert rows["x"] == (False, "DIFFERS") and not rows["gone"][0] and rows["new"][0]
+    exact = {name: agrees for name, agrees, _ in compare_variables(fresh, archived, 0.0, 0.0)}
+    assert exact["a"] and not exact["b"]
