@@ -343,10 +343,15 @@ def draw_quality_vs_signal(ds: xr.Dataset, title: str):
             ax.set_title(f"({chr(ord('a') + r)}) read noise {read_noise:g} e-, {100 * fraction:g} % of frames",
                          loc="left", fontsize=9)
             ax.grid(alpha=0.3)
+    # the axis spans the noise-free values: at a few photons the noise-dominated values run
+    # far off (a peak pixel of noise gives Strehl > 1, read noise over the field a d50 of arcsec)
+    settled = [ds[metric].isel(signal=-1).max()] + ([ds[f"{metric}_noiseless_detector"].max()]
+                                                    if f"{metric}_noiseless_detector" in ds else [])
+    axes[0, 0].set_ylim(0.0, 1.5 * float(max(settled)))
     fig.legend(*axes[0, 0].get_legend_handles_labels(), loc="outside lower center", ncol=2, fontsize=7,
                title="markers: selection criterion; thin dotted with markers: the same selection and shifts on "
-                     "the noiseless frames; dotted line: noiseless detector; bands: +-1 Monte-Carlo standard error",
-               title_fontsize=7)
+                     "the noiseless frames; dotted line: noiseless detector; bands: +-1 Monte-Carlo standard error; "
+                     "values beyond the axis: noise-dominated", title_fontsize=7)
     fig.suptitle(f"{title}: integrated-image {_METRICS[metric]} vs signal per frame")
     return fig
 
