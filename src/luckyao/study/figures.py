@@ -538,14 +538,16 @@ def draw_residuals(ds: xr.Dataset, title: str):
 
 def long_exposure_table_data(settings: dict, names, datasets) -> xr.Dataset:
     """Every case's long-exposure Strehl (all frames) without and with recentring, and its
-    best lucky Strehl (the largest over criteria and fractions, and where it is), each with
+    best lucky Strehl (the largest over the observable criteria, not the oracle
+    ``true_rms``, and the fractions, and where it is), each with
     its Monte-Carlo standard error from time blocks."""
     detector = settings.get("detector", "noiseless")
     strehl = [ds["long_exposure_strehl"].sel(detector=detector).isel(target=0).values for ds in datasets]
     error = [[float(ds["long_exposure_strehl_error"].isel(target=0)),
               float(ds["recentred_long_exposure_strehl_error"].sel(detector=detector).isel(target=0))]
              for ds in datasets]
-    lucky = [ds.strehl.sel(detector=detector).isel(target=0) for ds in datasets]
+    observable = [[c for c in ds.criterion.values if c != "true_rms"] for ds in datasets]  # not the oracle
+    lucky = [ds.strehl.sel(detector=detector, criterion=c).isel(target=0) for ds, c in zip(datasets, observable)]
     best = [np.unravel_index(int(np.argmax(s.values)), s.shape) for s in lucky]  # (criterion, fraction)
     data = {
         "long_exposure_strehl": (("case", "recentring"), np.array(strehl),
@@ -553,7 +555,7 @@ def long_exposure_table_data(settings: dict, names, datasets) -> xr.Dataset:
         "long_exposure_strehl_error": (("case", "recentring"), np.array(error), {
             "units": "1", "long_name": "Monte-Carlo standard error of the long-exposure Strehl (batch means)"}),
         "best_lucky_strehl": ("case", [float(s.values[b]) for s, b in zip(lucky, best)], {
-            "units": "1", "long_name": "largest integrated-image Strehl over the criteria and fractions"}),
+            "units": "1", "long_name": "largest integrated-image Strehl over the observable criteria and fractions"}),
         "best_criterion": ("case", [str(s.criterion.values[b[0]]) for s, b in zip(lucky, best)],
                            {"long_name": "selection criterion of the best lucky Strehl"}),
         "best_fraction": ("case", [float(s.fraction.values[b[1]]) for s, b in zip(lucky, best)],
@@ -561,7 +563,8 @@ def long_exposure_table_data(settings: dict, names, datasets) -> xr.Dataset:
     }
     if all("strehl_error" in ds for ds in datasets):
         data["best_lucky_strehl_error"] = ("case", [
-            float(ds.strehl_error.sel(detector=detector).isel(target=0).values[b]) for ds, b in zip(datasets, best)],
+            float(ds.strehl_error.sel(detector=detector, criterion=c).isel(target=0).values[b])
+            for ds, c, b in zip(datasets, observable, best)],
             {"units": "1", "long_name": "Monte-Carlo standard error of the best lucky Strehl (time blocks)"})
     return xr.Dataset(data, coords={**_case_coords(settings, names, datasets),
                                     "recentring": datasets[0]["recentring"]}, attrs={"detector": detector})
