@@ -53,7 +53,7 @@ def loop_seconds(case: Case, screens, reconstructors, commands, imaged=None):
 
 def replay_seconds(case: Case, screens, targets, dm_commands) -> float:
     start = time.perf_counter()
-    for _ in replay_frames(case, screens, targets, dm_commands, case.wfs.exposure_steps)():
+    for _ in replay_frames(case, screens, targets, dm_commands)():
         pass
     return time.perf_counter() - start
 

@@ -80,12 +80,11 @@ def test_replayed_frames_are_the_simulated_frames(field, runs):
     np.testing.assert_array_equal(star_frames[0], all_frames[0])
     for name in ("lgs_rms_nm", "lgs_residual_rms_nm", "true_rms_nm", "dm_commands_m", "r0_500nm_m"):
         np.testing.assert_array_equal(telemetry[name].values, full[name].values)
-    replay = replay_frames(field.case, field.screens, [1, 2], telemetry.dm_commands_m.values,
-                           field.case.wfs.exposure_steps, block_frames=7)
+    replay = replay_frames(field.case, field.screens, [1, 2], telemetry.dm_commands_m.values, block_frames=7)
     replayed = np.concatenate([frames for _, frames in replay()], axis=1)
     np.testing.assert_array_equal(replayed, all_frames[1:])
     # the DM matters: replaying without it gives other frames (the check above can fail)
-    flat = replay_frames(field.case, field.screens, [1], None, field.case.wfs.exposure_steps)
+    flat = replay_frames(field.case, field.screens, [1], None)
     assert not np.array_equal(next(iter(flat()))[1][0], all_frames[1, :64])
 
 

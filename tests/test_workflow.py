@@ -118,7 +118,7 @@ def test_every_quality_value_carries_its_error_and_paired_differences_are_tighte
     assert "strehl_error" in quality and "d50_arcsec_error" in quality
     paired = xr.open_dataset(workdir / "figures" / "paired.nc").sel(pair="turned asterism")
     difference, error, unpaired = (paired[v].values for v in ("strehl", "strehl_error", "strehl_unpaired_error"))
-    assert (np.abs(difference) <= 2 * error + 1e-6).all(), (difference, error)
+    assert (np.abs(difference) <= 2 * error).all(), (difference, error)
     assert (error < 0.2 * unpaired).all(), (error, unpaired)
 
 

@@ -136,7 +136,7 @@ def validate_study(config: dict, schema: dict | None = None) -> dict:
             _validate(resolved, case_schema, f"cases.{name}")
             _check_case(name, resolved, config["turbulence"])
             n_frames = frame_count(resolved)
-            blocks = config["lucky"].get("error_blocks", 5)
+            blocks = error_blocks(config["lucky"])
             if n_frames < 2 * blocks:
                 raise ConfigError(f"config key 'lucky.error_blocks': {blocks} blocks need at least {2 * blocks} "
                                   f"frames, case '{name}' has {n_frames}")
@@ -302,6 +302,11 @@ def commands_key(spec: dict) -> str:
     return "commands_" + sha256(spec)[:12]
 
 
+def error_blocks(lucky: dict) -> int:
+    """Time blocks for the Monte-Carlo errors: ``lucky.error_blocks``, by default 5 (the schema's)."""
+    return lucky.get("error_blocks", 5)
+
+
 def sweep_detectors(lucky: dict) -> dict:
     """The named detectors of ``lucky.detector_sweep`` (none without it): every read noise
     x ``levels`` photon counts per frame, log-spaced from ``min`` to ``max``."""
@@ -323,6 +328,7 @@ def lucky_settings(study: dict, cases: dict, case_name: str) -> dict:
     every listed detector, and the detector sweep when a ``quality_vs_signal`` figure
     shows the case (the sweep's cost goes only where it is drawn)."""
     lucky = {key: value for key, value in study["lucky"].items() if key != "detector_sweep"}
+    lucky["error_blocks"] = error_blocks(study["lucky"])
     if any(f["kind"] == "quality_vs_signal" and case_name in f["cases"] for f in study["figures"].values()):
         lucky["detectors"] = {**lucky["detectors"], **sweep_detectors(study["lucky"])}
     return {"seed": study["seed"], "case": case_name, "case_config": cases[case_name], **lucky}

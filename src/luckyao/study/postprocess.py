@@ -46,8 +46,7 @@ def _replayed(case: dict, telemetry: xr.Dataset, target: int, screens_path, scre
         raise ValueError(f"target {target} was not imaged by the simulation: its replay needs the screens")
     physics = Case.from_config(case)
     commands = telemetry["dm_commands_m"].values if "dm_commands_m" in telemetry else None
-    replay = replay_frames(physics, read_screens(screens_path, screens_metadata_path), [target], commands,
-                           case["wfs"]["exposure_steps"])
+    replay = replay_frames(physics, read_screens(screens_path, screens_metadata_path), [target], commands)
     axis = telemetry["axis_strehl"].values[target]
     peak, centre = float(telemetry.attrs["diffraction_limited_peak"]), physics.camera.n_pixels // 2
 
@@ -71,7 +70,7 @@ def lucky_case(settings: dict, frames_path, telemetry_path, out_path, screens_pa
                  for name, d in settings["detectors"].items()]
     pixel_scale = Case.from_config(case).camera.pixel_scale_arcsec
     n_frames, n_targets = telemetry.sizes["frame"], telemetry.sizes["target"]
-    n_blocks = settings.get("error_blocks", 5)
+    n_blocks = settings["error_blocks"]
     reference = case.get("reference_target")
     order = list(range(n_targets)) if reference is None else [reference] + [
         t for t in range(n_targets) if t != reference]  # the star first: the others take its measurements

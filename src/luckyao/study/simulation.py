@@ -46,19 +46,20 @@ class SciencePath:
     """
 
     def __init__(self, case: Case, screens: ScreenSet, targets, imaged):
+        self.case = case
         self.imager = imager = Imager(case.telescope, case.camera)
         self.targets, self.imaged = list(targets), list(imaged)
         self.propagator = Propagator(list(case.layers), screens, [case.targets[t] for t in self.targets],
                                      imager.grid, mask=imager.mask)
         self.tilt = TiltRemover.for_mask(imager.grid, imager.mask)
         self.to_camera = np.float32(REFERENCE_WAVELENGTH_M / case.camera.wavelength_m)
-        self.steps_per_frame = case.steps_per_frame
         self._all_imaged = self.imaged == list(range(len(self.targets)))
         self._intensity = np.empty((len(self.imaged), imager.fft_size, imager.fft_size), dtype=np.float32)
 
-    def surface(self, case: Case):
+    def dm_surface(self):
         """The DM surface function at this path's pupil samples (the case must have AO)."""
-        return case.ao.deformable_mirror(case.telescope).grid_surface(self.imager.grid, self.imager.mask)
+        ao, telescope = self.case.ao, self.case.telescope
+        return ao.deformable_mirror(telescope).grid_surface(self.imager.grid, self.imager.mask)
 
     def frame(self, frame: int, steps: np.ndarray, layer_scales: np.ndarray, dm=None,
               truth: bool = True) -> tuple[np.ndarray, np.ndarray | None]:
@@ -76,8 +77,8 @@ class SciencePath:
             self.imager.accumulate(imaged * self.to_camera, self._intensity)
             if truth:
                 rms2 += self.tilt.rms(phase_500) ** 2
-        images = self.imager.to_pixels(self._intensity / self.steps_per_frame)
-        return images, None if rms2 is None else np.sqrt(rms2 / self.steps_per_frame)
+        images = self.imager.to_pixels(self._intensity / self.case.steps_per_frame)
+        return images, None if rms2 is None else np.sqrt(rms2 / self.case.steps_per_frame)
 
 
 def simulate(case: Case, screens: ScreenSet, write_frames, sensor: LgsSensor | None = None,
@@ -104,7 +105,7 @@ def simulate(case: Case, screens: ScreenSet, write_frames, sensor: LgsSensor | N
     imager = science.imager
     correction = None
     if commands is not None:
-        correction = OpenLoopCorrection(*commands, science.surface(case), sensor.exposure_steps,
+        correction = OpenLoopCorrection(*commands, science.dm_surface(), sensor.exposure_steps,
                                         case.ao.delay_steps, spf)
         dm_commands = np.empty((n_frames * spf // sensor.exposure_steps, correction.dm.n_actuators), np.float32)
     steps_max = science.propagator.n_steps_max
@@ -188,20 +189,20 @@ def simulate(case: Case, screens: ScreenSet, write_frames, sensor: LgsSensor | N
 
 
 def replay_frames(case: Case, screens: ScreenSet, targets, dm_commands_m: np.ndarray | None,
-                  exposure_steps: int, block_frames: int = 64):
+                  block_frames: int = 64):
     """Callable returning an iterator of ``(start, frames (target, k, n, n))``: the science
     path of ``targets`` (indices into ``case.targets``) replayed frame by frame, corrected
     by the recorded DM commands (``dm_commands_m`` (exposure, actuator) of
     :func:`simulate`, None without AO). Recomputing these frames is as fast as simulating
     them and stores nothing: the frames of a field case's off-axis targets are made
     where they are used (post-processing), not kept on disk."""
-    spf = case.steps_per_frame
+    spf, exposure_steps = case.steps_per_frame, case.wfs.exposure_steps
 
     def iterate():
         science = SciencePath(case, screens, targets, range(len(targets)))
         dm = None
         if dm_commands_m is not None:
-            dm = DelayedDm(science.surface(case), exposure_steps, case.ao.delay_steps, spf)
+            dm = DelayedDm(science.dm_surface(), exposure_steps, case.ao.delay_steps, spf)
         block = np.empty((len(targets), block_frames) + (case.camera.n_pixels,) * 2, dtype=np.float32)
         for start in range(0, case.n_frames, block_frames):
             count = min(block_frames, case.n_frames - start)
