@@ -372,7 +372,8 @@ def add_recentred(frames, shifts, rows, partial):  # pragma: no cover (jit)
     ``partial[r, :n^2]`` (row-major; a row length other than a power of two keeps the
     images' rows in distinct cache sets). Output-row major: the partial rows of a few image
     rows stay in cache over the chunk's frames, ``tile`` image rows at a time (a frame's
-    rows read in runs).
+    rows read in runs). A rolled row is added as two slices indexed from 0 (loops that
+    vectorise: an index ``x - s`` would need numba's negative-index check per element).
     """
     k, n, _ = frames.shape
     tile = 4
@@ -381,16 +382,17 @@ def add_recentred(frames, shifts, rows, partial):  # pragma: no cover (jit)
             sx = shifts[j, 1] % n
             for y in range(y0, min(y0 + tile, n)):
                 src = frames[j, (y - shifts[j, 0]) % n]
+                body, head = src[:n - sx], src[n - sx:]  # to columns sx.. and ..sx
                 o = y * n
                 for c in range(rows.shape[1]):
                     r = rows[j, c]
                     if r < 0:
                         continue
-                    dst = partial[r, o:o + n]
-                    for x in range(sx, n):
-                        dst[x] += src[x - sx]
+                    to_body, to_head = partial[r, o + sx:o + n], partial[r, o:o + sx]
+                    for x in range(n - sx):
+                        to_body[x] += body[x]
                     for x in range(sx):
-                        dst[x] += src[x + n - sx]
+                        to_head[x] += head[x]
 
 
 @numba.njit(cache=True, nogil=True)
