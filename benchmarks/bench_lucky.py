@@ -19,7 +19,11 @@ of the run and, with ``--blocks``, of each time block), ``fixed_s``,
 (the generated frames tiled, yielded in blocks of 64 as the study reads them, nothing on
 disk), with its elapsed time and the process's peak resident memory.
 
+With ``--frames-file results/cases/ltao_r0_13.5cm/frames.nc`` (after the default study) the frames
+are that case's first 256 instead (real AO-corrected frames).
+
 Run: .venv/bin/python benchmarks/bench_lucky.py [--frames 256] [--cube 25000] [--repeats 1] [--blocks 10]
+     [--frames-file FRAMES.nc]
 """
 
 import os
@@ -90,6 +94,16 @@ def cached_frames(n_frames: int) -> np.ndarray:
     return np.load(path)
 
 
+def study_frames(path: str) -> np.ndarray:
+    """The first ``GENERATED`` frames of target 0 of a study's ``frames.nc`` (e.g. an LTAO
+    case's: real AO-corrected frames, dearer to detect than the generated ones, whose
+    seeing-limited half has fewer bright pixels)."""
+    import xarray as xr
+
+    with xr.open_dataset(path) as ds:
+        return ds.frames[0, :GENERATED].values.astype(np.float32)
+
+
 def externals(n_frames: int) -> list[ExternalCriterion]:
     rng = np.random.default_rng(1)
     return [ExternalCriterion(name, rng.uniform(50, 300, n_frames), False, "nm")
@@ -138,8 +152,10 @@ def main() -> None:
     parser.add_argument("--cube", type=int, default=0, help="frames of a real run too (0: none)")
     parser.add_argument("--repeats", type=int, default=1)
     parser.add_argument("--blocks", type=int, default=0, help="time blocks (n_blocks of run_lucky; 0: none)")
+    parser.add_argument("--frames-file", default=None,
+                        help="a study's frames.nc: its first 256 frames (of target 0) instead of the generated ones")
     args = parser.parse_args()
-    frames = cached_frames(GENERATED)
+    frames = cached_frames(GENERATED) if args.frames_file is None else study_frames(args.frames_file)
     n_det = len(sweep())
     half = args.frames // 4
     for _ in range(args.repeats):

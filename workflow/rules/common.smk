@@ -77,6 +77,16 @@ def figure_report_labels(fig, data):
     }
 
 
+def simulate_priority(case):
+    """Scheduling priority of a case's simulation, 0-9 (below the lucky rule's 10): the
+    cases whose post-processing is longest (detectors x targets: the detector sweep,
+    then the fields) are simulated first, so their long lucky jobs run beside the other
+    simulations instead of alone at the end of the study."""
+    settings = lucky_settings(STUDY, CASES, case)
+    work = len(settings["detectors"]) * len(CASES[case]["targets_arcsec"])
+    return min(9, work // 2)
+
+
 def replay_screens(case):
     """The screens (and metadata) when the case's lucky job replays targets its simulation
     did not image (a field with a reference star), else none."""

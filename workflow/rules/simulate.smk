@@ -13,6 +13,7 @@ rule simulate:
         case=lambda w: canonical_json(CASES[w.case]),
         seed=STUDY["seed"],
     threads: 1
+    priority: lambda w: simulate_priority(w.case)
     resources:
         mem_mb=4000,  # paper fidelity: 2-3 GB measured (the screens are memory-mapped)
         runtime=60,  # minutes; paper fidelity: 4-10 per target, up to 30 for a 7-target field case
