@@ -87,3 +87,13 @@ def test_lucky_image_errors_from_time_blocks_match_the_spread_over_seeds(seeds, 
             print(f"{criterion} selection, {metric} at {f:.0%}: spread {np.std(values, ddof=1):.3g}, "
                   f"block error {np.sqrt(np.mean(np.square(errors))):.3g}, ratio {ratio:.2f}")
             assert 0.55 < ratio < 1.6, (metric, f, ratio)
+
+
+def test_value_with_error_keeps_two_significant_digits_of_the_error():
+    """The README table's ``value ± error``: an error below 0.001 is not printed as 0.000."""
+    from luckyao.study.figures import value_with_error
+
+    assert value_with_error(0.005213, 0.000123) == "0.00521 ± 0.00012"
+    assert value_with_error(0.2201, 0.0031) == "0.2201 ± 0.0031"
+    assert value_with_error(0.2201, 0.031) == "0.220 ± 0.031"
+    assert value_with_error(0.5, 0.0) == "0.500 ± 0.000"

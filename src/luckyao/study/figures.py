@@ -570,10 +570,20 @@ def long_exposure_table_data(settings: dict, names, datasets) -> xr.Dataset:
                                     "recentring": datasets[0]["recentring"]}, attrs={"detector": detector})
 
 
+def value_with_error(value: float, error: float) -> str:
+    """``value ± error`` with the error to two significant digits and the value to the same
+    decimal place (at least three decimals): ``0.00521 ± 0.00012``, ``0.220 ± 0.003``."""
+    value, error = float(value), float(error)
+    decimals = 3
+    if np.isfinite(error) and error > 0:
+        decimals = max(3, 1 - int(np.floor(np.log10(error))))
+    return f"{value:.{decimals}f} ± {error:.{decimals}f}"
+
+
 def long_exposure_markdown(ds: xr.Dataset) -> str:
     """The table of :func:`long_exposure_table_data` as Markdown (for the README)."""
     def pm(value, error=None):
-        return f"{float(value):.3f}" + ("" if error is None else f" ± {float(error):.3f}")
+        return f"{float(value):.3f}" if error is None else value_with_error(value, error)
 
     lines = ["| case | long exposure | recentred | best lucky (criterion, fraction) |", "|---|---|---|---|"]
     for case in ds.case.values:
