@@ -100,9 +100,8 @@ def _seed(h, lanes, scalar):  # pragma: no cover (jit)
 
 
 @numba.njit(inline="always")
-def _next(s):  # pragma: no cover (jit)
-    """xoshiro256++ step of the scalar state ``s`` (4,): a uint64."""
-    a, b, c, d = s[0], s[1], s[2], s[3]
+def _xoshiro(a, b, c, d):  # pragma: no cover (jit)
+    """One xoshiro256++ step of the state (a, b, c, d): (output, new a, b, c, d)."""
     out = _rotl(a + d, 23) + a
     t = b << np.uint64(17)
     c ^= a
@@ -110,8 +109,13 @@ def _next(s):  # pragma: no cover (jit)
     b ^= c
     a ^= d
     c ^= t
-    d = _rotl(d, 45)
-    s[0], s[1], s[2], s[3] = a, b, c, d
+    return out, a, b, c, _rotl(d, 45)
+
+
+@numba.njit(inline="always")
+def _next(s):  # pragma: no cover (jit)
+    """xoshiro256++ step of the scalar state ``s`` (4,): a uint64."""
+    out, s[0], s[1], s[2], s[3] = _xoshiro(s[0], s[1], s[2], s[3])
     return out
 
 
@@ -127,15 +131,7 @@ def _fill_bits(lanes, out):  # pragma: no cover (jit)
     s0, s1, s2, s3 = lanes[0], lanes[1], lanes[2], lanes[3]
     for i in range(0, out.size, LANES):
         for lane in range(LANES):
-            a, b, c, d = s0[lane], s1[lane], s2[lane], s3[lane]
-            out[i + lane] = _rotl(a + d, 23) + a
-            t = b << np.uint64(17)
-            c ^= a
-            d ^= b
-            b ^= c
-            a ^= d
-            c ^= t
-            s0[lane], s1[lane], s2[lane], s3[lane] = a, b, c, _rotl(d, 45)
+            out[i + lane], s0[lane], s1[lane], s2[lane], s3[lane] = _xoshiro(s0[lane], s1[lane], s2[lane], s3[lane])
 
 
 @numba.njit(nogil=True)
