@@ -122,3 +122,22 @@ def test_strip_spec_holds_the_whole_flow():
     assert spec.n_major * spec.dx_m >= cos * 1000 * 38.8 * 0.0025 + 10.0
     assert spec.n_major * spec.dx_m / cos >= 100.0  # along-wind period
     assert spec.n_minor * spec.dx_m * cos >= 16.8  # width across the wind
+
+
+def test_screens_made_layers_at_once_are_the_same_numbers(tmp_path):
+    """``write_screens(threads=3)`` makes layers concurrently (largest first): each layer still
+    draws from its own ``default_rng([seed, layer])``, so the file is byte for byte that of one
+    thread, and each layer is ``strip_screen`` of its own stream."""
+    from luckyao.study.turbulence import read_screens, strip_specs, write_screens
+
+    spec = {"seed": 5, "duration_s": 0.5, "max_pixel_m": 0.05, "field_radius_arcsec": 10, "min_along_m": 20.0,
+            "min_across_m": 4.0, "time_step_s": 0.0025, "diameter_m": 1.0, "outer_scale_m": L0_M,
+            "height_m": [0.0, 1000.0, 8000.0], "wind_speed_m_s": [5.0, 30.0, 12.0],
+            "wind_direction_deg": [0.0, 120.0, 250.0]}
+    for threads in (1, 3):
+        write_screens(spec, tmp_path / f"{threads}.npy", tmp_path / f"{threads}.nc", {}, threads=threads)
+    assert (tmp_path / "1.npy").read_bytes() == (tmp_path / "3.npy").read_bytes()
+    screens = read_screens(tmp_path / "3.npy", tmp_path / "3.nc")
+    for i, s in enumerate(strip_specs(spec)):
+        np.testing.assert_array_equal(screens.screen(i),
+                                      strip_screen(s, L0_M, np.random.default_rng([spec["seed"], i])))

@@ -161,6 +161,52 @@ def test_run_lucky_matches_brute_force_for_every_criterion_and_fraction():
                                    plain / plain.sum(), rtol=1e-5, atol=1e-7)
 
 
+@pytest.mark.parametrize("min_in_block", [4, 1000])
+def test_guessed_bins_of_noisy_frames_are_corrected_to_each_block_and_run_selection(
+        monkeypatch, caplog, min_in_block):
+    """A noisy detector's frames go to bins guessed from the frames seen so far (in pass 1, without
+    a second draw of their noise); those guessed wrong are drawn again and moved. The run's and every
+    time block's integrated images still equal the brute-force sums of their best frames (ranked
+    over the run, or within the block), for blocks ranked by their own frames or by the run's
+    (``min_in_block``), with chunks that straddle blocks; some frames move, not all."""
+    from luckyao.lucky import selection
+
+    monkeypatch.setattr(selection._GuessedBins, "MIN_IN_BLOCK", min_in_block)
+    n, n_frames, chunk, seed, n_blocks = 32, 63, 5, 3, 3
+    rng = np.random.default_rng(12)
+    sigma = 1.0 + 2.0 * np.abs(np.sin(np.arange(n_frames) / 7.0)) + rng.uniform(0, 0.3, n_frames)  # drifting
+    pos = rng.uniform(10, 22, size=(n_frames, 2))
+    idx = np.arange(n)
+    frames = np.exp(-((idx[None, :, None] - pos[:, 0, None, None]) ** 2
+                      + (idx[None, None, :] - pos[:, 1, None, None]) ** 2) / (2 * sigma[:, None, None] ** 2))
+    frames = (frames / frames.sum(axis=(1, 2), keepdims=True)).astype(np.float32)
+    det = Detector("emccd", 2000.0, 0.1)
+    fractions = [0.1, 0.3, 0.5, 1.0]
+    peak = 1 / (2 * np.pi)
+    with caplog.at_level("INFO", logger="luckyao.progress"):
+        ds = run_lucky(chunker(frames, chunk), n_frames, [Detector("ideal"), det], fractions, peak, 0.02, seed,
+                       image_crop_px=None, n_blocks=n_blocks, progress_interval_s=0)
+    moved = float(caplog.text.split("emccd ")[1].split("%")[0])
+    assert 0 < moved < 100
+    noisy = detect(frames, det, seed)
+    per_block = n_frames // n_blocks
+    for name, larger in (("strehl", True), ("d50", False)):
+        values = ds.frame_criterion.sel(criterion=name, detector="emccd").values
+        for block in [None, *range(n_blocks)]:
+            first, count_of = (0, n_frames) if block is None else (block * per_block, per_block)
+            frame_ids = range(first, first + count_of)
+            order = sorted(frame_ids, key=lambda f: ((-1 if larger else 1) * values[f], f))
+            for fraction, count in zip(fractions, fraction_counts(count_of, fractions)):
+                expected = brute_force_image(noisy, order, count)
+                got = ds.strehl.sel(criterion=name, fraction=fraction, detector="emccd") if block is None else \
+                    ds.strehl_block.sel(block=block, criterion=name, fraction=fraction, detector="emccd")
+                assert float(got) == pytest.approx(float(expected.max() / peak), rel=1e-9), (block, name, fraction)
+                if block is None:
+                    clean = brute_force_image(frames, order, count, centroid_frames=noisy)
+                    assert float(ds.strehl_noiseless.sel(criterion=name, fraction=fraction, detector="emccd")) == \
+                        pytest.approx(float(clean.max() / peak), rel=1e-9)
+
+
 def test_noiseless_selection_picks_the_sharpest_frames():
     """Centred Gaussians of known widths: Strehl (peak 1/(2 pi sigma^2)) and d50
     (2 sigma sqrt(2 ln 2)) both rank the narrowest first; the 25% selection keeps exactly

@@ -87,6 +87,13 @@ def simulate_priority(case):
     return min(9, work // 2)
 
 
+def lucky_mem_mb(case):
+    """Memory a case's lucky job may hold [MB] at paper fidelity (10 time blocks): about
+    1.5 GB plus 0.21 GB of partial sums per detector (the sweep's 19 detectors: 4.7 GB
+    measured), at least 3 GB (a field's replay; its memory-mapped screens not counted)."""
+    return max(3000, 1500 + 210 * len(lucky_settings(STUDY, CASES, case)["detectors"]))
+
+
 def replay_screens(case):
     """The screens (and metadata) when the case's lucky job replays targets its simulation
     did not image (a field with a reference star), else none."""

@@ -13,7 +13,7 @@ rule lucky:
     threads: 1
     priority: 10  # a finished simulation's frame cube is post-processed (and, if temporary, deleted) first
     resources:
-        mem_mb=3000,  # paper fidelity: 2 GB measured
+        mem_mb=lambda w: lucky_mem_mb(w.case),
         runtime=30,  # minutes; paper fidelity: up to 15 measured
     log:
         "logs/lucky/{case}.log",

@@ -144,10 +144,11 @@ class KeyedNoise:
         self._unit = unit
 
     def detect(self, detector: Detector, seed: int, first_frame: int,
-               out: np.ndarray | None = None) -> tuple[np.ndarray, ...]:
+               out: np.ndarray | None = None, drawn: np.ndarray | None = None) -> tuple[np.ndarray, ...]:
         """The prepared chunk's detected frames [electron] (k, n, n) float32 (``out`` if
         given), frames ``first_frame..``, with their row and column sums (k, n) float64
-        and peak (k,) float32. A noisy detector only."""
+        and peak (k,) float32. A noisy detector only. With ``drawn`` (k,) bool, only those
+        frames are drawn (the same draws as when all are): the others' values are undefined."""
         if detector.noiseless:
             raise ValueError("a noiseless detector draws nothing")
         unit = self._unit
@@ -156,9 +157,10 @@ class KeyedNoise:
         if out.shape != unit.shape or out.dtype != np.float32 or not out.flags.c_contiguous:
             raise ValueError(f"out must be C-contiguous float32 of at least {unit.shape}")
         rows, cols, peak = np.empty((k, n)), np.empty((k, n)), np.empty(k, np.float32)
+        drawn = np.ones(k, np.bool_) if drawn is None else np.asarray(drawn, np.bool_)
         kernels.detect_frames(unit, self._within[:k], self._rows_cumulative[:k],
                               float(detector.photons_per_frame), np.float32(detector.read_noise_e),
-                              seed, detector_key(detector.name), first_frame, out, rows, cols, peak,
+                              seed, detector_key(detector.name), first_frame, drawn, out, rows, cols, peak,
                               self._bits, self._normals)
         return out, rows, cols, peak
 

@@ -333,19 +333,22 @@ def _finish(out, normals, sigma, rows, cols):  # pragma: no cover (jit)
 
 
 @numba.njit(cache=True, nogil=True)
-def detect_frames(unit, within, row_cumulative, photons, sigma, seed, key, first_frame, out, rows, cols,
+def detect_frames(unit, within, row_cumulative, photons, sigma, seed, key, first_frame, drawn, out, rows, cols,
                   peak, bits, normals):  # pragma: no cover (jit)
     """Detected frames ``out`` (k, n, n) float32 of unit-flux frames ``unit`` (k, n, n)
     (negative values count as 0) of cumulative sums ``within``, ``row_cumulative``
     (:func:`cumulative`), photons per frame ``photons``, read noise ``sigma`` (float32):
     frame ``j``'s streams are keyed by (seed, key, first_frame + j). Also per frame: row
-    and column sums ``rows``, ``cols`` (k, n) float64 and the peak ``peak`` (k,). Work
-    arrays: ``bits`` (n^2 / 2,) uint64, ``normals`` (n^2,) float32."""
+    and column sums ``rows``, ``cols`` (k, n) float64 and the peak ``peak`` (k,). Only the
+    frames ``j`` with ``drawn[j]`` (k,) bool are drawn (the others' outputs untouched).
+    Work arrays: ``bits`` (n^2 / 2,) uint64, ``normals`` (n^2,) float32."""
     k, n, _ = unit.shape
     lanes = np.empty((4, LANES), np.uint64)
     s = np.empty(4, np.uint64)
     bits32 = bits.view(np.uint32)
     for j in range(k):
+        if not drawn[j]:
+            continue
         _seed(stream_key(seed, key, first_frame + j), lanes, s)
         frame = out[j]
         frame[:] = 0.0
@@ -360,8 +363,9 @@ def detect_frames(unit, within, row_cumulative, photons, sigma, seed, key, first
 
 
 @numba.njit(cache=True, nogil=True)
-def add_recentred(frames, shifts, rows, partial):  # pragma: no cover (jit)
-    """``partial[r] += roll(frames[j], shifts[j])`` (float64) for every ``r = rows[j, c] >= 0``.
+def add_recentred(frames, shifts, rows, partial, sign):  # pragma: no cover (jit)
+    """``partial[r] += sign roll(frames[j], shifts[j])`` (float64) for every ``r = rows[j, c] >= 0``,
+    ``sign`` 1.0 (add; the same sums bit for bit as without it) or -1.0 (take out).
 
     ``frames`` (k, n, n) float32, ``shifts`` (k, 2) int64 (y, x) with ``np.roll``
     semantics, ``rows`` (k, m) int64, ``partial`` (R, >= n^2) float64, image ``r`` in
@@ -386,9 +390,9 @@ def add_recentred(frames, shifts, rows, partial):  # pragma: no cover (jit)
                         continue
                     to_body, to_head = partial[r, o + sx:o + n], partial[r, o:o + sx]
                     for x in range(n - sx):
-                        to_body[x] += body[x]
+                        to_body[x] += sign * body[x]
                     for x in range(sx):
-                        to_head[x] += head[x]
+                        to_head[x] += sign * head[x]
 
 
 @numba.njit(cache=True, nogil=True)

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 import xarray as xr
 
-from ..progress import Progress
+from ..progress import Progress, log
 from . import kernels
 from .detector import Detector, KeyedNoise, detector_key
 from .metrics import EncircledEnergy, centroid_px, fwhm_arcsec, strehl
@@ -183,6 +183,11 @@ def _add_noiseless_detector(frames: np.ndarray, shifts: np.ndarray, rows: np.nda
         frame_window[:] = flat[:, window]
 
 
+def _rows(first_rows: np.ndarray, bins: np.ndarray) -> np.ndarray:
+    """Partial-sum rows ``first_rows + bins`` (k, m) of bins (k, m), -1 where a bin is -1."""
+    return np.where(bins >= 0, first_rows + bins, -1)
+
+
 def _window(frames: np.ndarray, shifts: np.ndarray, window: np.ndarray, out: np.ndarray) -> None:
     """Values (k, w) at the flat pixels ``window`` of frames (k, n, n) rolled by ``shifts``."""
     n = frames.shape[-1]
@@ -223,14 +228,18 @@ class _Blocks:
     """Time blocks of a run, each selected and scored on its own (Monte-Carlo errors).
 
     Frame ``f`` is in block ``f // block_frames`` (none past ``n_blocks`` blocks). A
-    block's (criterion, block bin) partial sums are rows ``row0 + (s n_crit + c) n_bins +
-    b`` of the run's partial sums, in row set ``s = block mod n_sets``: enough sets that
-    the blocks a chunk of frames spans never share one, so the chunks are processed
-    whole (the per-frame metrics do not depend on block boundaries), and each block is
-    scored and its set cleared after the chunk that completes it.
+    block's (criterion, block bin) partial sums are rows of the run's partial sums:
+    ``row0 + (s n_stream + j) n_bins + b`` for the ``j``-th streamed criterion, in row set
+    ``s = block mod n_sets``: enough sets that the blocks a chunk of frames spans never
+    share one, so the chunks are processed whole (the per-frame metrics do not depend on
+    block boundaries), and each block is scored and its set cleared after the chunk that
+    completes it. The ``resident`` criteria (contiguous) have rows of their own for every
+    block, after the sets: their sums may be corrected until the last chunk (frames moved
+    between bins, :class:`_GuessedBins`).
     """
 
-    def __init__(self, n_frames: int, n_blocks: int, fractions, n_det: int, n_crit: int, row0: int):
+    def __init__(self, n_frames: int, n_blocks: int, fractions, n_det: int, n_crit: int, row0: int,
+                 resident: Sequence[int] = ()):
         if n_blocks == 1 or n_blocks < 0 or (n_blocks and n_frames // n_blocks < 1):
             raise ValueError(f"n_blocks must be 0 (no errors) or >= 2 with a frame each, got {n_blocks}")
         self.n_blocks, self.row0, self.n_crit = n_blocks, row0, n_crit
@@ -238,6 +247,14 @@ class _Blocks:
         self.counts = fraction_counts(max(self.block_frames, 1), fractions)
         self.n_bins = len(np.unique(self.counts)) if n_blocks else 0
         self.last_bin = np.searchsorted(np.unique(self.counts), self.counts)
+        self.is_resident = np.isin(np.arange(n_crit), resident)
+        if np.any(np.diff(np.flatnonzero(self.is_resident)) != 1):
+            raise ValueError(f"resident criteria must be contiguous, got {resident}")
+        self.slot = np.zeros(n_crit, dtype=np.int64)  # index among the streamed or the resident criteria
+        for kind in (True, False):
+            self.slot[self.is_resident == kind] = np.arange(np.count_nonzero(self.is_resident == kind))
+        self.n_resident = int(self.is_resident.sum())
+        self.n_stream = n_crit - self.n_resident
         self.n_sets = self.max_chunk = 0
         self.bins = np.full((n_det, n_crit, n_frames), -1, dtype=np.int64)
         shape = (n_blocks, n_crit, len(self.counts), n_det)
@@ -248,7 +265,14 @@ class _Blocks:
         if self.n_blocks:
             self.max_chunk = chunk_frames
             self.n_sets = min(self.n_blocks, -(-chunk_frames // self.block_frames) + 1)
-        return self.n_sets * self.n_crit * self.n_bins
+        return (self.n_sets * self.n_stream + self.n_blocks * self.n_resident) * self.n_bins
+
+    def first_row(self, block, crit):
+        """First row of criterion ``crit``'s bins in block ``block`` (broadcast arrays)."""
+        streamed = self.row0 + ((block % max(self.n_sets, 1)) * self.n_stream + self.slot[crit]) * self.n_bins
+        resident = (self.row0 + (self.n_sets * self.n_stream + block * self.n_resident + self.slot[crit])
+                    * self.n_bins)
+        return np.where(self.is_resident[crit], resident, streamed)
 
     def assign(self, values: np.ndarray, larger_is_better, crits) -> None:
         """Block bins of criteria ``crits`` from ``values`` (criterion, detector, frame)."""
@@ -259,16 +283,17 @@ class _Blocks:
                     order = rank_frames(values[c, i, sl], larger_is_better[c])
                     self.bins[i, c, sl] = selection_bins(order, self.counts)[0]
 
-    def rows(self, i: int, crits, sl: slice) -> np.ndarray:
-        """Block rows (k, len(crits)) of detector ``i``'s frames ``sl`` (-1: none)."""
+    def rows(self, i: int, crits, sl: slice, bins: np.ndarray | None = None) -> np.ndarray:
+        """Block rows (k, len(crits)) of detector ``i``'s frames ``sl`` (-1: none), of their
+        bins (default), or of other block bins ``bins`` (detector, criterion, frame)."""
         if not self.n_blocks:
             return np.full((sl.stop - sl.start, 0), -1, dtype=np.int64)
         if sl.stop - sl.start > self.max_chunk:
             raise ValueError(f"a chunk of {sl.stop - sl.start} frames, more than the first's {self.max_chunk}")
-        block_set = (np.arange(sl.start, sl.stop) // self.block_frames % self.n_sets)[:, None]
-        bins = self.bins[i][crits][:, sl].T
-        first = self.row0 + (block_set * self.n_crit + np.asarray(crits, dtype=np.int64)) * self.n_bins
-        return np.where(bins >= 0, first + bins, -1)
+        block = (np.arange(sl.start, sl.stop) // self.block_frames)[:, None]
+        crits = np.asarray(crits, dtype=np.int64)
+        bins = (self.bins if bins is None else bins)[i][crits][:, sl].T
+        return np.where(bins >= 0, self.first_row(block, crits[None, :]) + bins, -1)
 
     def score_completed(self, sl: slice, crits, partial: np.ndarray, encircled, diffraction_limited_peak: float,
                         pixel_scale_arcsec: float) -> None:
@@ -277,13 +302,69 @@ class _Blocks:
         if not self.n_blocks or not crits:
             return
         for block in range(sl.start // self.block_frames, min(sl.stop // self.block_frames, self.n_blocks)):
-            first = self.row0 + ((block % self.n_sets) * self.n_crit + crits[0]) * self.n_bins
+            first = int(self.first_row(block, crits[0]))
             rows = partial[:, first:first + len(crits) * self.n_bins]
             _, *scores = _score(rows, len(crits), self.n_bins, self.last_bin, encircled,
                                 diffraction_limited_peak, pixel_scale_arcsec)
             for values, score in zip(self.values, scores):
                 values[block, crits[0]:crits[-1] + 1] = score
             rows[:] = 0.0
+
+
+def _bins_of_rank(rank: np.ndarray, distinct: np.ndarray) -> np.ndarray:
+    """Bins of (possibly fractional) ranks, as :func:`selection_bins`: ``b`` with
+    ``distinct[b-1] <= rank < distinct[b]``, -1 past the last."""
+    bins = np.searchsorted(distinct, rank, side="right")
+    bins[bins == len(distinct)] = -1
+    return bins
+
+
+class _GuessedBins:
+    """Bins of the image criteria guessed while pass 1 detects the frames, so that a noisy
+    detector's frames are added then, without a second draw of their noise.
+
+    A frame's guessed rank is its rank among the frames of its detector seen so far (its
+    chunk's included; NaN last), scaled to the run's length, and in its time block among
+    the block's frames seen so far once there are ``MIN_IN_BLOCK`` of them (before, the
+    run's rank scaled to the block's length); its bin follows as in :func:`selection_bins`.
+    Pass 2 draws again only the frames whose final bin differs and moves them: the result
+    is the same sum as adding them to their final bins at once, to float64 rounding
+    (measured for the paper's sweep: about a quarter of the frames move).
+    """
+
+    MIN_IN_BLOCK = 256
+
+    def __init__(self, bins_shape: tuple, counts: np.ndarray, blocks: _Blocks):
+        self.run = np.full(bins_shape, -1, dtype=np.int64)  # (detector, criterion, frame)
+        self.block = np.full(bins_shape, -1, dtype=np.int64)
+        self.distinct, self.n_frames, self.blocks = np.unique(counts), bins_shape[-1], blocks
+        self.block_distinct = np.unique(blocks.counts)
+        self._seen: dict = {}  # (detector, criterion) -> sorted keys of the run, of the block, block index
+
+    def guess(self, i: int, c: int, sl: slice, values: np.ndarray, larger_is_better: bool) -> None:
+        """Guess the bins of detector ``i``'s frames ``sl`` by criterion ``c`` from their ``values``."""
+        key = -np.asarray(values, dtype=np.float64) if larger_is_better else np.asarray(values, dtype=np.float64)
+        key = np.where(np.isnan(key), np.inf, key)
+        run, in_block, current = self._seen.get((i, c), (np.empty(0), np.empty(0), -1))
+        run = _merged(run, key)
+        self.run[i, c, sl] = _bins_of_rank(np.searchsorted(run, key) * (self.n_frames / len(run)), self.distinct)
+        blocks = self.blocks
+        if blocks.n_blocks:
+            block_of = np.arange(sl.start, sl.stop) // blocks.block_frames
+            for b in np.unique(block_of[block_of < blocks.n_blocks]):
+                mine = block_of == b
+                in_block = _merged(in_block if b == current else np.empty(0), key[mine])
+                current = b
+                ranked = in_block if len(in_block) >= self.MIN_IN_BLOCK else run
+                rank = np.searchsorted(ranked, key[mine]) * (blocks.block_frames / len(ranked))
+                self.block[i, c, np.arange(sl.start, sl.stop)[mine]] = _bins_of_rank(rank, self.block_distinct)
+        self._seen[(i, c)] = (run, in_block, current)
+
+
+def _merged(sorted_keys: np.ndarray, new: np.ndarray) -> np.ndarray:
+    """``sorted_keys`` with ``new`` inserted, sorted."""
+    new = np.sort(new)
+    return np.insert(sorted_keys, np.searchsorted(sorted_keys, new), new)
 
 
 def run_lucky(iter_chunks: Callable[[], Iterable[tuple[int, np.ndarray]]], n_frames: int,
@@ -321,8 +402,12 @@ def run_lucky(iter_chunks: Callable[[], Iterable[tuple[int, np.ndarray]]], n_fra
     exposure and into the (criterion, bin) partial sums of the criteria ranked before
     pass 1: the external ones, and with a reference all. Frames are ranked per criterion
     (:func:`rank_frames`) and assigned to nested bins (:func:`selection_bins`). Without a
-    reference, pass 2 detects the frames again (the same draws; checked by their flux)
-    and adds them into the partial sums of the image criteria. Each fraction's image is
+    reference, the image criteria are ranked after pass 1: pass 2 adds a noiseless
+    detector's frames into their partial sums; a noisy detector's frames went in pass 1
+    to bins guessed from the frames seen so far (:class:`_GuessedBins`), and pass 2 draws
+    again only those whose final bin (of the run or of their time block) differs (the
+    same draws; checked by their flux) and moves them, so the noise of most frames is drawn
+    once (its sums equal direct ones to float64 rounding). Each fraction's image is
     the cumulative sum of its bins. Alongside, the noiseless frames (the input, as
     float32) get the same detector's shifts and the same bins into a second set of
     partial sums: the ``*_noiseless`` scores separate a wrong selection or recentring
@@ -343,7 +428,9 @@ def run_lucky(iter_chunks: Callable[[], Iterable[tuple[int, np.ndarray]]], n_fra
     deviation of its block values over ``sqrt(n_blocks)`` (batch means: the blocks are
     independent when longer than the turbulence's correlation time; compare
     ``tests/test_errors.py``). The blocks' partial sums are extra rows of the same
-    sums (:class:`_Blocks`), scored and cleared after the chunk that ends the block.
+    sums (:class:`_Blocks`), scored and cleared after the chunk that ends the block; with
+    guessed bins, the image criteria's rows of every block stay until pass 2 (detectors x
+    2 x blocks x distinct counts x n x n float64: 1.7 GB for the paper's sweep).
 
     Returns a CF-style :class:`xarray.Dataset`: ``strehl``, ``fwhm_arcsec``,
     ``d50_arcsec`` (criterion, fraction, detector) and the same of the noiseless frames
@@ -388,7 +475,12 @@ def run_lucky(iter_chunks: Callable[[], Iterable[tuple[int, np.ndarray]]], n_fra
     bin_of_frame = np.full((n_det, n_crit, n_frames), -1, dtype=np.int64)
     last_bin = np.searchsorted(np.unique(counts), counts)
 
-    blocks = _Blocks(n_frames, n_blocks, fractions, n_det, n_crit, row0=n_crit * n_bins + 1)
+    late = [c for c in range(n_crit) if c not in early]  # the image criteria of the frames themselves
+    # a noisy detector's frames are added to guessed bins of the late criteria in pass 1
+    guessing = bool(late) and not all(d.noiseless for d in detectors)
+    blocks = _Blocks(n_frames, n_blocks, fractions, n_det, n_crit, row0=n_crit * n_bins + 1,
+                     resident=late if guessing else ())
+    guessed = _GuessedBins(bin_of_frame.shape, counts, blocks) if guessing else None
 
     def assign_bins(crits):
         for i in range(n_det):
@@ -461,30 +553,37 @@ def run_lucky(iter_chunks: Callable[[], Iterable[tuple[int, np.ndarray]]], n_fra
                 frame_centroid[i, sl] = centroids
                 shifts[i, sl] = recentring_shifts_px(centroids, n)
             # the early criteria and the recentred long exposure: shifts known now
-            rows_early = (row_of[early] + bin_of_frame[i][early][:, sl]).T  # (k, early)
-            rows_early = np.where(bin_of_frame[i][early][:, sl].T >= 0, rows_early, -1)
-            rows_early = np.concatenate([rows_early, np.full((k, 1), lc)], axis=1)
+            rows_early = np.concatenate([_rows(row_of[early, 0], bin_of_frame[i][early][:, sl].T),
+                                         np.full((k, 1), lc)], axis=1)  # (k, early + 1)
             rows_block = blocks.rows(i, early, sl)
             if detector.noiseless:
                 _add_noiseless_detector(detected, shifts[i, sl], rows_early, partial[i], partial_noiseless[i],
                                         lc, frame_window[i, sl], window)
-                kernels.add_recentred(detected, shifts[i, sl], rows_block, partial_rows[i])
+                kernels.add_recentred(detected, shifts[i, sl], rows_block, partial_rows[i], 1.0)
             else:
-                kernels.add_recentred(detected, shifts[i, sl], np.concatenate([rows_early, rows_block], axis=1),
-                                      partial_rows[i])
-                kernels.add_recentred(unit, shifts[i, sl], rows_early[:, :-1], noiseless_rows[i])
+                rows_guessed = rows_guessed_block = np.empty((k, 0), dtype=np.int64)
+                if guessed is not None:
+                    for c, per_frame in zip(late, (frame_strehl[i, sl], frame_d50_px[i, sl])):
+                        guessed.guess(i, c, sl, per_frame, criteria[c][1])
+                    rows_guessed = _rows(row_of[late, 0], guessed.run[i][late][:, sl].T)
+                    rows_guessed_block = blocks.rows(i, late, sl, guessed.block)
+                kernels.add_recentred(detected, shifts[i, sl], np.concatenate(
+                    [rows_early, rows_block, rows_guessed, rows_guessed_block], axis=1), partial_rows[i], 1.0)
+                kernels.add_recentred(unit, shifts[i, sl], np.concatenate([rows_early[:, :-1], rows_guessed], axis=1),
+                                      noiseless_rows[i], 1.0)
                 _window(detected, shifts[i, sl], window, frame_window[i, sl])
         blocks.score_completed(sl, early, partial, encircled, diffraction_limited_peak, pixel_scale_arcsec)
         progress.update(sl.stop)
     frame_d50_arcsec = frame_d50_px * pixel_scale_arcsec
 
     # ranking of the image criteria of the frames themselves
-    late = [c for c in range(n_crit) if c not in early]
     if late:
         values[0], values[1] = frame_strehl, frame_d50_arcsec
         assign_bins(late)
-        # pass 2: the same noise again, recentred into the late criteria's partial sums
+        # pass 2: noiseless frames into the late criteria's partial sums; a noisy detector's
+        # frames whose guessed bins were wrong drawn again (the same noise) and moved
         progress = Progress("lucky pass 2/2: frames", n_frames, progress_interval_s)
+        n_drawn = np.zeros(n_det, dtype=np.int64)
         for start, frames in _chunks(iter_chunks, n_frames):
             k = len(frames)
             sl = slice(start, start + k)
@@ -493,25 +592,40 @@ def run_lucky(iter_chunks: Callable[[], Iterable[tuple[int, np.ndarray]]], n_fra
                 noise = KeyedNoise(n, k)
                 buffer = np.empty((k, n, n), np.float32)
             for i, detector in enumerate(detectors):
-                rows_late = np.where(bin_of_frame[i][late][:, sl].T >= 0,
-                                     (row_of[late] + bin_of_frame[i][late][:, sl]).T, -1)
+                final = bin_of_frame[i][late][:, sl].T  # (k, late)
+                rows_late = _rows(row_of[late, 0], final)
                 rows_block = blocks.rows(i, late, sl)
                 if detector.noiseless:
                     detected = np.array(frames, dtype=np.float32, copy=True)
                     _add_noiseless_detector(detected, shifts[i, sl], rows_late, partial[i], partial_noiseless[i])
-                    kernels.add_recentred(detected, shifts[i, sl], rows_block, partial_rows[i])
+                    kernels.add_recentred(detected, shifts[i, sl], rows_block, partial_rows[i], 1.0)
                     continue
+                moved = np.concatenate([final != guessed.run[i][late][:, sl].T,
+                                        blocks.bins[i][late][:, sl].T != guessed.block[i][late][:, sl].T], axis=1)
+                moved = moved[:, :len(late) + rows_block.shape[1]]  # without blocks, no block rows
+                drawn = moved.any(axis=1)
+                if not drawn.any():
+                    continue
+                n_drawn[i] += np.count_nonzero(drawn)
                 if unit is None:
                     noise.prepare(frames)
                     unit = np.asarray(frames, dtype=np.float32)
-                detected, rows, _, _ = noise.detect(detector, seed, start, buffer)
-                if not np.array_equal(rows.sum(axis=1), frame_flux[i, sl]):
+                detected, rows, _, _ = noise.detect(detector, seed, start, buffer, drawn)
+                if not np.array_equal(rows[drawn].sum(axis=1), frame_flux[i, sl][drawn]):
                     raise RuntimeError(f"frames {start}.. differ between the two passes")
-                kernels.add_recentred(detected, shifts[i, sl], np.concatenate([rows_late, rows_block], axis=1),
-                                      partial_rows[i])
-                kernels.add_recentred(unit, shifts[i, sl], rows_late, noiseless_rows[i])
+                guessed_rows = np.concatenate([_rows(row_of[late, 0], guessed.run[i][late][:, sl].T),
+                                               blocks.rows(i, late, sl, guessed.block)], axis=1)
+                out_of, into = np.where(moved, guessed_rows, -1), np.where(
+                    moved, np.concatenate([rows_late, rows_block], axis=1), -1)
+                for frames_of, sums, m in ((detected, partial_rows[i], moved.shape[1]),
+                                           (unit, noiseless_rows[i], len(late))):
+                    kernels.add_recentred(frames_of, shifts[i, sl], out_of[:, :m], sums, -1.0)
+                    kernels.add_recentred(frames_of, shifts[i, sl], into[:, :m], sums, 1.0)
             blocks.score_completed(sl, late, partial, encircled, diffraction_limited_peak, pixel_scale_arcsec)
             progress.update(sl.stop)
+        if guessed is not None:
+            log.info("lucky pass 2/2: frames drawn again (guessed bins wrong) per noisy detector: %s", ", ".join(
+                f"{d.name} {n / n_frames:.1%}" for d, n in zip(detectors, n_drawn) if not d.noiseless))
     long_cog = partial[:, lc]
     frame_recentred_strehl = _value_at_peak(frame_window, window, long_cog, frame_flux,
                                             diffraction_limited_peak)

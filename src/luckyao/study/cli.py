@@ -45,7 +45,8 @@ def cmd_turbulence(args) -> None:
     from .turbulence import write_screens
 
     spec = json.loads(args.spec)
-    write_screens(spec, args.screens, args.metadata, provenance("luckyao normalised phase screens", spec, spec["seed"]))
+    write_screens(spec, args.screens, args.metadata, provenance("luckyao normalised phase screens", spec, spec["seed"]),
+                  threads=args.threads)
 
 
 def cmd_simulate(args) -> None:
@@ -171,6 +172,7 @@ def main(argv=None) -> int:
     p.add_argument("--spec", required=True, help="turbulence spec as JSON")
     p.add_argument("--screens", required=True, help="flat .npy of the screens")
     p.add_argument("--metadata", required=True, help="netCDF description of the screens")
+    p.add_argument("--threads", type=int, default=1, help="layers made at once (the same numbers for any)")
     p.set_defaults(func=cmd_turbulence)
 
     p = sub.add_parser("simulate", help="run one case's time loop")
