@@ -7,6 +7,7 @@ rule reconstructor:
     params:
         spec=lambda w: canonical_json(RECONSTRUCTOR_BY_KEY[w.rkey]),
     threads: 1
+    priority: 10  # seconds each, before the screens: every AO simulation waits for them
     resources:
         mem_mb=1500,  # at most 1.1 GB measured
         runtime=5,  # minutes; at most 1 measured
@@ -27,6 +28,7 @@ rule commands:
     params:
         spec=lambda w: canonical_json(COMMANDS_BY_KEY[w.ckey]),
     threads: 1
+    priority: 10  # seconds each, before the screens: every AO simulation waits for them
     resources:
         mem_mb=1500,  # at most 1.1 GB measured (32x32 WFS)
         runtime=5,  # minutes; at most 1 measured
