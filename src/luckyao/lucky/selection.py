@@ -292,7 +292,7 @@ class _Blocks:
             raise ValueError(f"a chunk of {sl.stop - sl.start} frames, more than the first's {self.max_chunk}")
         block = (np.arange(sl.start, sl.stop) // self.block_frames)[:, None]
         crits = np.asarray(crits, dtype=np.int64)
-        bins = (self.bins if bins is None else bins)[i][crits][:, sl].T
+        bins = (self.bins if bins is None else bins)[i, crits, sl].T
         return np.where(bins >= 0, self.first_row(block, crits[None, :]) + bins, -1)
 
     def score_completed(self, sl: slice, crits, partial: np.ndarray, encircled, diffraction_limited_peak: float,
@@ -343,8 +343,8 @@ class _GuessedBins:
 
     def guess(self, i: int, c: int, sl: slice, values: np.ndarray, larger_is_better: bool) -> None:
         """Guess the bins of detector ``i``'s frames ``sl`` by criterion ``c`` from their ``values``."""
-        key = -np.asarray(values, dtype=np.float64) if larger_is_better else np.asarray(values, dtype=np.float64)
-        key = np.where(np.isnan(key), np.inf, key)
+        key = np.asarray(values, dtype=np.float64) * (-1.0 if larger_is_better else 1.0)
+        key[np.isnan(key)] = np.inf
         run, in_block, current = self._seen.get((i, c), (np.empty(0), np.empty(0), -1))
         run = _merged(run, key)
         self.run[i, c, sl] = _bins_of_rank(np.searchsorted(run, key) * (self.n_frames / len(run)), self.distinct)
@@ -501,7 +501,7 @@ def run_lucky(iter_chunks: Callable[[], Iterable[tuple[int, np.ndarray]]], n_fra
     noise = buffer = None
     frame_window = window = None
     lc = n_crit * n_bins  # row of the recentred long exposure (all frames) in partial
-    row_of = np.arange(n_crit)[:, None] * n_bins  # first row of each criterion
+    row_of = np.arange(n_crit) * n_bins  # first row of each criterion
     progress = Progress("lucky pass 1/2: frames", n_frames, progress_interval_s)
     for start, frames in _chunks(iter_chunks, n_frames):
         k, n = len(frames), frames.shape[-1]
@@ -553,7 +553,7 @@ def run_lucky(iter_chunks: Callable[[], Iterable[tuple[int, np.ndarray]]], n_fra
                 frame_centroid[i, sl] = centroids
                 shifts[i, sl] = recentring_shifts_px(centroids, n)
             # the early criteria and the recentred long exposure: shifts known now
-            rows_early = np.concatenate([_rows(row_of[early, 0], bin_of_frame[i][early][:, sl].T),
+            rows_early = np.concatenate([_rows(row_of[early], bin_of_frame[i, early, sl].T),
                                          np.full((k, 1), lc)], axis=1)  # (k, early + 1)
             rows_block = blocks.rows(i, early, sl)
             if detector.noiseless:
@@ -565,7 +565,7 @@ def run_lucky(iter_chunks: Callable[[], Iterable[tuple[int, np.ndarray]]], n_fra
                 if guessed is not None:
                     for c, per_frame in zip(late, (frame_strehl[i, sl], frame_d50_px[i, sl])):
                         guessed.guess(i, c, sl, per_frame, criteria[c][1])
-                    rows_guessed = _rows(row_of[late, 0], guessed.run[i][late][:, sl].T)
+                    rows_guessed = _rows(row_of[late], guessed.run[i, late, sl].T)
                     rows_guessed_block = blocks.rows(i, late, sl, guessed.block)
                 kernels.add_recentred(detected, shifts[i, sl], np.concatenate(
                     [rows_early, rows_block, rows_guessed, rows_guessed_block], axis=1), partial_rows[i], 1.0)
@@ -592,17 +592,17 @@ def run_lucky(iter_chunks: Callable[[], Iterable[tuple[int, np.ndarray]]], n_fra
                 noise = KeyedNoise(n, k)
                 buffer = np.empty((k, n, n), np.float32)
             for i, detector in enumerate(detectors):
-                final = bin_of_frame[i][late][:, sl].T  # (k, late)
-                rows_late = _rows(row_of[late, 0], final)
+                rows_late = _rows(row_of[late], bin_of_frame[i, late, sl].T)  # (k, late)
                 rows_block = blocks.rows(i, late, sl)
                 if detector.noiseless:
                     detected = np.array(frames, dtype=np.float32, copy=True)
                     _add_noiseless_detector(detected, shifts[i, sl], rows_late, partial[i], partial_noiseless[i])
                     kernels.add_recentred(detected, shifts[i, sl], rows_block, partial_rows[i], 1.0)
                     continue
-                moved = np.concatenate([final != guessed.run[i][late][:, sl].T,
-                                        blocks.bins[i][late][:, sl].T != guessed.block[i][late][:, sl].T], axis=1)
-                moved = moved[:, :len(late) + rows_block.shape[1]]  # without blocks, no block rows
+                final_rows = np.concatenate([rows_late, rows_block], axis=1)
+                guessed_rows = np.concatenate([_rows(row_of[late], guessed.run[i, late, sl].T),
+                                               blocks.rows(i, late, sl, guessed.block)], axis=1)
+                moved = final_rows != guessed_rows  # (k, late [+ late]): rows differ where bins do
                 drawn = moved.any(axis=1)
                 if not drawn.any():
                     continue
@@ -613,10 +613,7 @@ def run_lucky(iter_chunks: Callable[[], Iterable[tuple[int, np.ndarray]]], n_fra
                 detected, rows, _, _ = noise.detect(detector, seed, start, buffer, drawn)
                 if not np.array_equal(rows[drawn].sum(axis=1), frame_flux[i, sl][drawn]):
                     raise RuntimeError(f"frames {start}.. differ between the two passes")
-                guessed_rows = np.concatenate([_rows(row_of[late, 0], guessed.run[i][late][:, sl].T),
-                                               blocks.rows(i, late, sl, guessed.block)], axis=1)
-                out_of, into = np.where(moved, guessed_rows, -1), np.where(
-                    moved, np.concatenate([rows_late, rows_block], axis=1), -1)
+                out_of, into = np.where(moved, guessed_rows, -1), np.where(moved, final_rows, -1)
                 for frames_of, sums, m in ((detected, partial_rows[i], moved.shape[1]),
                                            (unit, noiseless_rows[i], len(late))):
                     kernels.add_recentred(frames_of, shifts[i, sl], out_of[:, :m], sums, -1.0)
