@@ -22,7 +22,7 @@ import pyfftw
 import scipy.fft
 import scipy.special
 
-from .kernels import component, dilate, dirichlet, radial_energy
+from .kernels import component, dilate, dirichlet, first_crossing, radial_energy
 
 
 def centroid_px(images: np.ndarray) -> np.ndarray:
@@ -170,13 +170,15 @@ class EncircledEnergy:
         spectrum = pyfftw.empty_aligned((n, n // 2 + 1), dtype=np.complex64)
         return frame, spectrum, pyfftw.FFTW(frame, spectrum, axes=(0, 1), flags=("FFTW_ESTIMATE",), threads=1)
 
-    def fractions_binned(self, images: np.ndarray, centres_px: np.ndarray) -> np.ndarray:
+    def fractions_binned(self, images: np.ndarray, centres_px: np.ndarray,
+                         flux: np.ndarray | None = None) -> np.ndarray:
         """:meth:`fractions` of images (k, n, n) about ``centres_px`` (k, 2), shape
         (k, n_radii), summed otherwise: the terms of equal ``|f|`` first (float64, one
         kernel value each), then (k, bins) @ (bins, n_radii) in float64. The same sum in
         another order (agrees to float32 rounding); ~4x fewer operations. The spectra are
         FFTW's (float32, one frame at a time: :attr:`_rfft2`), not scipy's as in
-        :meth:`fractions`: the same transform to float32 rounding."""
+        :meth:`fractions`: the same transform to float32 rounding. ``flux`` (k,): the images'
+        sums if known (float64; default: summed here)."""
         images = np.asarray(images)
         n = self.n_pixels
         if images.ndim != 3 or images.shape[1:] != (n, n):
@@ -189,14 +191,16 @@ class EncircledEnergy:
             np.copyto(frame, image, casting="same_kind")
             fft.execute()
             radial_energy(spectrum, centres[j], fy, fx, row_end, bin_of, weight, binned[j])
-        flux = images.sum(axis=(-2, -1), dtype=np.float64)
+        if flux is None:
+            flux = images.sum(axis=(-2, -1), dtype=np.float64)
+        flux = np.asarray(flux, dtype=np.float64)
         with np.errstate(invalid="ignore", divide="ignore"):
             return np.where(flux[:, None] > 0, (binned @ kernel) / flux[:, None], np.nan)
 
-    def radius_px_binned(self, images: np.ndarray, centres_px: np.ndarray,
-                         level: float = 0.5) -> np.ndarray:
+    def radius_px_binned(self, images: np.ndarray, centres_px: np.ndarray, level: float = 0.5,
+                         flux: np.ndarray | None = None) -> np.ndarray:
         """:meth:`radius_px` of images (k, n, n) from :meth:`fractions_binned`, shape (k,)."""
-        return _first_crossing(self.radii_px, self.fractions_binned(images, centres_px), level)
+        return _first_crossing(self.radii_px, self.fractions_binned(images, centres_px, flux), level)
 
     def radius_px(self, images: np.ndarray, level: float = 0.5,
                   centres_px: np.ndarray | None = None) -> np.ndarray:
@@ -210,35 +214,12 @@ class EncircledEnergy:
 
 
 def _first_crossing(radii: np.ndarray, values: np.ndarray, level: float) -> np.ndarray:
-    """Radius of the first crossing of ``level`` by ``values`` (..., n_r) sampled on ``radii``."""
-    lead = values.shape[:-1]
-    v = values.reshape(-1, values.shape[-1])
-    above = v >= level
-    j = np.argmax(above, axis=-1)
-    valid = above.any(axis=-1) & (j > 0)
-    j = np.where(valid, j, 1)
-    i0 = np.clip(j - 2, 0, len(radii) - 4)
-    idx = i0[:, None] + np.arange(4)[None, :]
-    nodes_r = radii[idx]  # (m, 4)
-    nodes_v = np.take_along_axis(v, idx, axis=-1)
-
-    def interpolant(r):
-        total = np.zeros_like(r)
-        for a in range(4):  # Lagrange basis over the 4 nodes (not a pixel loop)
-            term = nodes_v[:, a].copy()
-            for b in range(4):
-                if b != a:
-                    term *= (r - nodes_r[:, b]) / (nodes_r[:, a] - nodes_r[:, b])
-            total += term
-        return total
-
-    lo, hi = radii[j - 1], radii[j]
-    for _ in range(40):  # bisection: the bracket shrinks to 1e-12 of a grid step
-        mid = 0.5 * (lo + hi)
-        below = interpolant(mid) < level
-        lo = np.where(below, mid, lo)
-        hi = np.where(below, hi, mid)
-    return np.where(valid, 0.5 * (lo + hi), np.nan).reshape(lead)
+    """Radius of the first crossing of ``level`` by ``values`` (..., n_r) sampled on ``radii``
+    (:func:`luckyao.lucky.kernels.first_crossing`)."""
+    v = np.ascontiguousarray(values, dtype=np.float64).reshape(-1, values.shape[-1])
+    out = np.empty(len(v))
+    first_crossing(np.ascontiguousarray(radii, dtype=np.float64), v, float(level), out)
+    return out.reshape(values.shape[:-1])
 
 
 def d50_arcsec(images: np.ndarray, pixel_scale_arcsec: float,

@@ -159,30 +159,6 @@ def _score(partial: np.ndarray, n_crit: int, n_bins: int, last_bin: np.ndarray,
     return images, s_int, fwhm_int, d50_int
 
 
-def _add_noiseless_detector(frames: np.ndarray, shifts: np.ndarray, rows: np.ndarray, partial: np.ndarray,
-                            partial_noiseless: np.ndarray, long_row: int | None = None,
-                            frame_window: np.ndarray | None = None, window: np.ndarray | None = None) -> None:
-    """A noiseless detector's chunk of frames (k, n, n) float32, recentred by ``shifts``
-    (k, 2), into the rows ``rows`` (k, m) (-1: none; ``long_row``: the recentred long
-    exposure) of its partial sums (R, n, n) float64, both sets: per chunk one float32
-    matrix product (criterion x bin rows) @ (frames), added in float64; the long
-    exposure's sum in float64; the window's values into ``frame_window``."""
-    k, n, _ = frames.shape
-    flat = shift_frames(frames, shifts).reshape(k, n * n)
-    n_rows = partial_noiseless.shape[0]
-    one_hot = np.zeros((n_rows, k), dtype=np.float32)
-    kept = (rows >= 0) & (rows != long_row) if long_row is not None else rows >= 0
-    frame_index, _ = np.nonzero(kept)
-    one_hot[rows[kept], frame_index] = 1.0
-    if kept.any():
-        summed = (one_hot @ flat).reshape(n_rows, n, n)
-        partial[:n_rows] += summed
-        partial_noiseless += summed
-    if long_row is not None:
-        partial[long_row] += flat.sum(axis=0, dtype=np.float64).reshape(n, n)
-        frame_window[:] = flat[:, window]
-
-
 def _rows(first_rows: np.ndarray, bins: np.ndarray) -> np.ndarray:
     """Partial-sum rows ``first_rows + bins`` (k, m) of bins (k, m), -1 where a bin is -1."""
     return np.where(bins >= 0, first_rows + bins, -1)
@@ -394,16 +370,16 @@ def run_lucky(iter_chunks: Callable[[], Iterable[tuple[int, np.ndarray]]], n_fra
     drawing them again gives the same frames. A noiseless detector's frames are the input
     as float32.
 
-    Pass 1 detects each chunk for each detector, measures per-frame Strehl, d50 (noisy
-    detectors: :meth:`EncircledEnergy.radius_px_binned`, the same encircled energy summed
-    by radial bins) and centre of gravity, sums the long exposure without recentring,
+    Pass 1 detects each chunk for each detector, measures per-frame Strehl, d50
+    (:meth:`EncircledEnergy.radius_px_binned`, the encircled energy summed by radial bins)
+    and centre of gravity (from the frame's row and column sums), sums the long exposure without recentring,
     and, since each frame's shift is known then (its own centroid, or the reference's),
     recentres it (:func:`recentring_shifts_px`, np.roll semantics) into the recentred long
     exposure and into the (criterion, bin) partial sums of the criteria ranked before
     pass 1: the external ones, and with a reference all. Frames are ranked per criterion
     (:func:`rank_frames`) and assigned to nested bins (:func:`selection_bins`). Without a
     reference, the image criteria are ranked after pass 1: pass 2 adds a noiseless
-    detector's frames into their partial sums; a noisy detector's frames went in pass 1
+    detector's frames to their partial sums; a noisy detector's frames went in pass 1
     to bins guessed from the frames seen so far (:class:`_GuessedBins`), and pass 2 draws
     again only those whose final bin (of the run or of their time block) differs (the
     same draws; checked by their flux) and moves them, so the noise of most frames is drawn
@@ -411,11 +387,9 @@ def run_lucky(iter_chunks: Callable[[], Iterable[tuple[int, np.ndarray]]], n_fra
     the cumulative sum of its bins. Alongside, the noiseless frames (the input, as
     float32) get the same detector's shifts and the same bins into a second set of
     partial sums: the ``*_noiseless`` scores separate a wrong selection or recentring
-    from the noise in the final image. A noisy detector's sums are float64 throughout
-    (:func:`luckyao.lucky.kernels.add_recentred`); a noiseless detector's are, per chunk,
-    one float32 matrix product (criterion x bin rows) @ (recentred frames) added in
-    float64, both sets receiving the very same products, so its ``*_noiseless`` values
-    equal the others bit for bit. Memory: the two sets of partial sums, float64
+    from the noise in the final image. The sums are float64 throughout, frame by frame
+    (:func:`luckyao.lucky.kernels.add_recentred`); a noiseless detector's second set is
+    its first, copied, so its ``*_noiseless`` values equal the others bit for bit. Memory: the two sets of partial sums, float64
     (2 x detectors x criteria x distinct counts x n x n), plus a chunk's work arrays
     (~1 kB per pixel and frame of a chunk) and, when scoring, the integrated images
     (criteria x fractions x detectors x n x n) of one set at a time (the cumulative
@@ -522,32 +496,29 @@ def run_lucky(iter_chunks: Callable[[], Iterable[tuple[int, np.ndarray]]], n_fra
             else:
                 shifts = np.zeros((n_det, n_frames, 2), dtype=np.int64)
         sl = slice(start, start + k)
-        unit = None
+        unit = np.ascontiguousarray(frames, dtype=np.float32)
+        prepared = False
         for i, detector in enumerate(detectors):
             if detector.noiseless:
-                detected = np.array(frames, dtype=np.float32, copy=True)
-                flux = detected.sum(axis=(-2, -1), dtype=np.float64)
-                if reference is None:
-                    centroids = centroid_px(detected)
-                    frame_strehl[i, sl] = strehl(detected, diffraction_limited_peak)
-                    frame_d50_px[i, sl] = encircled.radius_px(detected, centres_px=centroids) * 2
-                long_none[i] += detected.sum(axis=0, dtype=np.float64)
+                detected = unit
+                rows, cols, peak = np.empty((k, n)), np.empty((k, n)), np.empty(k, np.float32)
+                kernels.frame_sums(unit, rows, cols, peak)
             else:
                 if noise is None or noise.max_frames < k:
                     noise = KeyedNoise(n, max(k, 64))
                     buffer = np.empty((noise.max_frames, n, n), np.float32)
-                if unit is None:
-                    noise.prepare(frames)
-                    unit = np.asarray(frames, dtype=np.float32)
+                if not prepared:
+                    noise.prepare(unit)
+                    prepared = True
                 detected, rows, cols, peak = noise.detect(detector, seed, start, buffer)
-                flux = rows.sum(axis=1)
-                if reference is None:
-                    with np.errstate(invalid="ignore", divide="ignore"):
-                        centroids = np.stack([rows @ np.arange(n, dtype=np.float64) / flux,
-                                              cols @ np.arange(n, dtype=np.float64) / flux], axis=-1)
-                        frame_strehl[i, sl] = np.where(flux > 0, peak / (diffraction_limited_peak * flux), np.nan)
-                    frame_d50_px[i, sl] = encircled.radius_px_binned(detected, centroids) * 2
-                kernels.add_frames(detected, long_none[i])
+            flux = rows.sum(axis=1)
+            if reference is None:
+                with np.errstate(invalid="ignore", divide="ignore"):
+                    centroids = np.stack([rows @ np.arange(n, dtype=np.float64) / flux,
+                                          cols @ np.arange(n, dtype=np.float64) / flux], axis=-1)
+                    frame_strehl[i, sl] = np.where(flux > 0, peak / (diffraction_limited_peak * flux), np.nan)
+                frame_d50_px[i, sl] = encircled.radius_px_binned(detected, centroids, flux=flux) * 2
+            kernels.add_frames(detected, long_none[i])
             frame_flux[i, sl] = flux
             if reference is None:
                 frame_centroid[i, sl] = centroids
@@ -556,22 +527,18 @@ def run_lucky(iter_chunks: Callable[[], Iterable[tuple[int, np.ndarray]]], n_fra
             rows_early = np.concatenate([_rows(row_of[early], bin_of_frame[i, early, sl].T),
                                          np.full((k, 1), lc)], axis=1)  # (k, early + 1)
             rows_block = blocks.rows(i, early, sl)
-            if detector.noiseless:
-                _add_noiseless_detector(detected, shifts[i, sl], rows_early, partial[i], partial_noiseless[i],
-                                        lc, frame_window[i, sl], window)
-                kernels.add_recentred(detected, shifts[i, sl], rows_block, partial_rows[i], 1.0)
-            else:
-                rows_guessed = rows_guessed_block = np.empty((k, 0), dtype=np.int64)
-                if guessed is not None:
-                    for c, per_frame in zip(late, (frame_strehl[i, sl], frame_d50_px[i, sl])):
-                        guessed.guess(i, c, sl, per_frame, criteria[c][1])
-                    rows_guessed = _rows(row_of[late], guessed.run[i, late, sl].T)
-                    rows_guessed_block = blocks.rows(i, late, sl, guessed.block)
-                kernels.add_recentred(detected, shifts[i, sl], np.concatenate(
-                    [rows_early, rows_block, rows_guessed, rows_guessed_block], axis=1), partial_rows[i], 1.0)
+            rows_guessed = rows_guessed_block = np.empty((k, 0), dtype=np.int64)
+            if guessed is not None and not detector.noiseless:
+                for c, per_frame in zip(late, (frame_strehl[i, sl], frame_d50_px[i, sl])):
+                    guessed.guess(i, c, sl, per_frame, criteria[c][1])
+                rows_guessed = _rows(row_of[late], guessed.run[i, late, sl].T)
+                rows_guessed_block = blocks.rows(i, late, sl, guessed.block)
+            kernels.add_recentred(detected, shifts[i, sl], np.concatenate(
+                [rows_early, rows_block, rows_guessed, rows_guessed_block], axis=1), partial_rows[i], 1.0)
+            if not detector.noiseless:  # a noiseless detector's noiseless sums are its sums (copied when scoring)
                 kernels.add_recentred(unit, shifts[i, sl], np.concatenate([rows_early[:, :-1], rows_guessed], axis=1),
                                       noiseless_rows[i], 1.0)
-                _window(detected, shifts[i, sl], window, frame_window[i, sl])
+            _window(detected, shifts[i, sl], window, frame_window[i, sl])
         blocks.score_completed(sl, early, partial, encircled, diffraction_limited_peak, pixel_scale_arcsec)
         progress.update(sl.stop)
     frame_d50_arcsec = frame_d50_px * pixel_scale_arcsec
@@ -587,19 +554,18 @@ def run_lucky(iter_chunks: Callable[[], Iterable[tuple[int, np.ndarray]]], n_fra
         for start, frames in _chunks(iter_chunks, n_frames):
             k = len(frames)
             sl = slice(start, start + k)
-            unit = None
+            unit = np.ascontiguousarray(frames, dtype=np.float32)
+            prepared = False
             if noise is not None and noise.max_frames < k:
                 noise = KeyedNoise(n, k)
                 buffer = np.empty((k, n, n), np.float32)
             for i, detector in enumerate(detectors):
                 rows_late = _rows(row_of[late], bin_of_frame[i, late, sl].T)  # (k, late)
                 rows_block = blocks.rows(i, late, sl)
-                if detector.noiseless:
-                    detected = np.array(frames, dtype=np.float32, copy=True)
-                    _add_noiseless_detector(detected, shifts[i, sl], rows_late, partial[i], partial_noiseless[i])
-                    kernels.add_recentred(detected, shifts[i, sl], rows_block, partial_rows[i], 1.0)
-                    continue
                 final_rows = np.concatenate([rows_late, rows_block], axis=1)
+                if detector.noiseless:
+                    kernels.add_recentred(unit, shifts[i, sl], final_rows, partial_rows[i], 1.0)
+                    continue
                 guessed_rows = np.concatenate([_rows(row_of[late], guessed.run[i, late, sl].T),
                                                blocks.rows(i, late, sl, guessed.block)], axis=1)
                 moved = final_rows != guessed_rows  # (k, late [+ late]): rows differ where bins do
@@ -607,9 +573,9 @@ def run_lucky(iter_chunks: Callable[[], Iterable[tuple[int, np.ndarray]]], n_fra
                 if not drawn.any():
                     continue
                 n_drawn[i] += np.count_nonzero(drawn)
-                if unit is None:
-                    noise.prepare(frames)
-                    unit = np.asarray(frames, dtype=np.float32)
+                if not prepared:
+                    noise.prepare(unit)
+                    prepared = True
                 detected, rows, _, _ = noise.detect(detector, seed, start, buffer, drawn)
                 if not np.array_equal(rows[drawn].sum(axis=1), frame_flux[i, sl][drawn]):
                     raise RuntimeError(f"frames {start}.. differ between the two passes")
@@ -629,6 +595,9 @@ def run_lucky(iter_chunks: Callable[[], Iterable[tuple[int, np.ndarray]]], n_fra
 
     # integrated images: cumulative sums of bins, scored
     scoring = (n_crit, n_bins, last_bin, encircled, diffraction_limited_peak, pixel_scale_arcsec)
+    for i, detector in enumerate(detectors):
+        if detector.noiseless:
+            partial_noiseless[i] = partial[i, :lc]
     _, s_nl, fwhm_nl, d50_nl = _score(partial_noiseless, *scoring)
     del partial_noiseless, noiseless_rows
     long_images = np.stack([long_none, long_cog])  # (recentring, det, n, n)
