@@ -299,13 +299,16 @@ class _GuessedBins:
     """Bins of the image criteria guessed while pass 1 detects the frames, so that a noisy
     detector's frames are added then, without a second draw of their noise.
 
-    A frame's guessed rank is its rank among the frames of its detector seen so far (its
-    chunk's included; NaN last), scaled to the run's length, and in its time block among
-    the block's frames seen so far once there are ``MIN_IN_BLOCK`` of them (before, the
-    run's rank scaled to the block's length); its bin follows as in :func:`selection_bins`.
-    Pass 2 draws again only the frames whose final bin differs and moves them: the result
-    is the same sum as adding them to their final bins at once, to float64 rounding
-    (measured for the paper's sweep: about a quarter of the frames move).
+    A frame's final rank (:func:`rank_frames`) is the number of frames of smaller key plus
+    the number of earlier frames of equal key (ties, e.g. the NaN of noise-dominated frames,
+    keep frame order). The second term is known when the frame is seen, all earlier frames
+    having been; the first is guessed from the frames of its detector seen so far (its chunk's
+    included), scaled to the run's length, and in its time block from the block's frames seen
+    so far once there are ``MIN_IN_BLOCK`` of them (before, from the run's, scaled to the
+    block's length). Its bin follows as in :func:`selection_bins`. Pass 2 draws again only
+    the frames whose final bin differs and moves them: the result is the same sum as adding
+    them to their final bins at once, to float64 rounding (measured for the paper's sweep:
+    about a quarter of the frames move).
     """
 
     MIN_IN_BLOCK = 256
@@ -322,19 +325,31 @@ class _GuessedBins:
         key = np.asarray(values, dtype=np.float64) * (-1.0 if larger_is_better else 1.0)
         key[np.isnan(key)] = np.inf
         run, in_block, current = self._seen.get((i, c), (np.empty(0), np.empty(0), -1))
+        ties = _earlier_ties(run, key)
         run = _merged(run, key)
-        self.run[i, c, sl] = _bins_of_rank(np.searchsorted(run, key) * (self.n_frames / len(run)), self.distinct)
+        smaller = np.searchsorted(run, key) * (self.n_frames / len(run))
+        self.run[i, c, sl] = _bins_of_rank(smaller + ties, self.distinct)
         blocks = self.blocks
         if blocks.n_blocks:
             block_of = np.arange(sl.start, sl.stop) // blocks.block_frames
             for b in np.unique(block_of[block_of < blocks.n_blocks]):
                 mine = block_of == b
-                in_block = _merged(in_block if b == current else np.empty(0), key[mine])
+                in_block = in_block if b == current else np.empty(0)
+                ties = _earlier_ties(in_block, key[mine])
+                in_block = _merged(in_block, key[mine])
                 current = b
                 ranked = in_block if len(in_block) >= self.MIN_IN_BLOCK else run
-                rank = np.searchsorted(ranked, key[mine]) * (blocks.block_frames / len(ranked))
-                self.block[i, c, np.arange(sl.start, sl.stop)[mine]] = _bins_of_rank(rank, self.block_distinct)
+                smaller = np.searchsorted(ranked, key[mine]) * (blocks.block_frames / len(ranked))
+                self.block[i, c, np.arange(sl.start, sl.stop)[mine]] = _bins_of_rank(smaller + ties,
+                                                                                      self.block_distinct)
         self._seen[(i, c)] = (run, in_block, current)
+
+
+def _earlier_ties(seen: np.ndarray, keys: np.ndarray) -> np.ndarray:
+    """Per key of ``keys`` (frames in order, after those of the sorted keys ``seen``): how many
+    earlier frames have an equal key."""
+    in_seen = np.searchsorted(seen, keys, side="right") - np.searchsorted(seen, keys)
+    return in_seen + np.tril(keys[:, None] == keys[None, :], -1).sum(axis=1)
 
 
 def _merged(sorted_keys: np.ndarray, new: np.ndarray) -> np.ndarray:
