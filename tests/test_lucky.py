@@ -161,17 +161,14 @@ def test_run_lucky_matches_brute_force_for_every_criterion_and_fraction():
                                    plain / plain.sum(), rtol=1e-5, atol=1e-7)
 
 
-@pytest.mark.parametrize("min_in_block", [4, 1000])
-def test_guessed_bins_of_noisy_frames_are_corrected_to_each_block_and_run_selection(
-        monkeypatch, caplog, min_in_block):
-    """A noisy detector's frames go to bins guessed from the frames seen so far (in pass 1, without
-    a second draw of their noise); those guessed wrong are drawn again and moved. The run's and every
-    time block's integrated images still equal the brute-force sums of their best frames (ranked
-    over the run, or within the block), for blocks ranked by their own frames or by the run's
-    (``min_in_block``), with chunks that straddle blocks; some frames move, not all."""
-    from luckyao.lucky import selection
-
-    monkeypatch.setattr(selection._GuessedBins, "MIN_IN_BLOCK", min_in_block)
+def test_guessed_bins_of_noisy_frames_are_corrected_to_each_block_and_run_selection(caplog):
+    """A noisy detector's frames go to bins guessed from the frames seen so far and the noiseless
+    frames (in pass 1, without a second draw of their noise); those guessed wrong are drawn again
+    and moved. The run's and every time block's integrated images still equal the brute-force
+    sums of their best frames (ranked over the run, or within the block), with chunks that
+    straddle blocks; some frames move, not all. A detector so bright (1e12 photons) that the noise
+    reorders no frame moves none: the noiseless frames predict the frames not seen yet, whose
+    drift the ranks among the frames seen so far miss."""
     n, n_frames, chunk, seed, n_blocks = 32, 63, 5, 3, 3
     rng = np.random.default_rng(12)
     sigma = 1.0 + 2.0 * np.abs(np.sin(np.arange(n_frames) / 7.0)) + rng.uniform(0, 0.3, n_frames)  # drifting
@@ -184,10 +181,14 @@ def test_guessed_bins_of_noisy_frames_are_corrected_to_each_block_and_run_select
     fractions = [0.1, 0.3, 0.5, 1.0]
     peak = 1 / (2 * np.pi)
     with caplog.at_level("INFO", logger="luckyao.progress"):
-        ds = run_lucky(chunker(frames, chunk), n_frames, [Detector("ideal"), det], fractions, peak, 0.02, seed,
-                       image_crop_px=None, n_blocks=n_blocks, progress_interval_s=0)
+        ds = run_lucky(chunker(frames, chunk), n_frames, [Detector("ideal"), det, Detector("bright", 1e12)],
+                       fractions, peak, 0.02, seed, image_crop_px=None, n_blocks=n_blocks, progress_interval_s=0)
     moved = float(caplog.text.split("emccd ")[1].split("%")[0])
     assert 0 < moved < 100
+    assert float(caplog.text.split("bright ")[1].split("%")[0]) == 0
+    for name in ("strehl", "d50"):
+        np.testing.assert_array_equal(rank_frames(ds.frame_criterion.sel(criterion=name, detector="bright"), True),
+                                      rank_frames(ds.frame_criterion.sel(criterion=name, detector="ideal"), True))
     noisy = detect(frames, det, seed)
     per_block = n_frames // n_blocks
     for name, larger in (("strehl", True), ("d50", False)):

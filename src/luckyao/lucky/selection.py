@@ -200,6 +200,37 @@ def _attrs(units: str, long_name: str) -> dict:
     return {"units": units, "long_name": long_name}
 
 
+def _measure(frames: np.ndarray, rows: np.ndarray, cols: np.ndarray, peak: np.ndarray,
+             encircled: EncircledEnergy, diffraction_limited_peak: float) -> tuple[np.ndarray, ...]:
+    """Flux (k,), centre of gravity (k, 2) (y, x) [pixel], Strehl (k,) and d50 [pixel] (k,) of
+    frames (k, n, n) from their row and column sums (k, n) and peaks (k,)
+    (:func:`luckyao.lucky.kernels.frame_sums`); NaN where the flux is not positive."""
+    n = frames.shape[-1]
+    flux = rows.sum(axis=1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        centroids = np.stack([rows @ np.arange(n, dtype=np.float64) / flux,
+                              cols @ np.arange(n, dtype=np.float64) / flux], axis=-1)
+        strehl_ratio = np.where(flux > 0, peak / (diffraction_limited_peak * flux), np.nan)
+    return flux, centroids, strehl_ratio, encircled.radius_px_binned(frames, centroids, flux=flux) * 2
+
+
+def _noiseless_measures(iter_chunks, n_frames: int, encircled_of: Callable[[int], EncircledEnergy],
+                        diffraction_limited_peak: float, progress_interval_s: float) -> tuple[np.ndarray, ...]:
+    """:func:`_measure` of every noiseless frame: flux, centroids, Strehl, d50 [pixel] (frame[, 2])."""
+    out = np.full(n_frames, np.nan), np.full((n_frames, 2), np.nan), np.full(n_frames, np.nan), np.full(
+        n_frames, np.nan)
+    progress = Progress("lucky pass 0/2: noiseless frames", n_frames, progress_interval_s)
+    for start, frames in _chunks(iter_chunks, n_frames):
+        unit = np.ascontiguousarray(frames, dtype=np.float32)
+        k, n = unit.shape[:2]
+        rows, cols, peak = np.empty((k, n)), np.empty((k, n)), np.empty(k, np.float32)
+        kernels.frame_sums(unit, rows, cols, peak)
+        for whole, part in zip(out, _measure(unit, rows, cols, peak, encircled_of(n), diffraction_limited_peak)):
+            whole[start:start + k] = part
+        progress.update(start + k)
+    return out
+
+
 class _Blocks:
     """Time blocks of a run, each selected and scored on its own (Monte-Carlo errors).
 
@@ -302,47 +333,87 @@ class _GuessedBins:
     A frame's final rank (:func:`rank_frames`) is the number of frames of smaller key plus
     the number of earlier frames of equal key (ties, e.g. the NaN of noise-dominated frames,
     keep frame order). The second term is known when the frame is seen, all earlier frames
-    having been; the first is guessed from the frames of its detector seen so far (its chunk's
-    included), scaled to the run's length, and in its time block from the block's frames seen
-    so far once there are ``MIN_IN_BLOCK`` of them (before, from the run's, scaled to the
-    block's length). Its bin follows as in :func:`selection_bins`. Pass 2 draws again only
-    the frames whose final bin differs and moves them: the result is the same sum as adding
-    them to their final bins at once, to float64 rounding (measured for the paper's sweep:
-    about a quarter of the frames move).
+    having been. Of the first, the frames seen so far (its chunk's included) are counted; the
+    frames not seen yet are predicted from their noiseless values (``clean``, measured before
+    pass 1): those whose noiseless key is below the noiseless key that ranks among the seen
+    frames as the frame's key does among theirs (quantile mapping: exact when noise does
+    not reorder the frames, the plain rank among the seen frames scaled to the run when it is
+    all noise). The same in the frame's time block, with the mapping of the whole run seen
+    so far. Its bin follows as in :func:`selection_bins`. Pass 2 draws again only the frames
+    whose final bin differs and moves them: the result is the same sum as adding them to
+    their final bins at once, to float64 rounding.
     """
 
     MIN_IN_BLOCK = 256
 
-    def __init__(self, bins_shape: tuple, counts: np.ndarray, blocks: _Blocks):
+    def __init__(self, bins_shape: tuple, counts: np.ndarray, blocks: _Blocks, clean: dict):
         self.run = np.full(bins_shape, -1, dtype=np.int64)  # (detector, criterion, frame)
         self.block = np.full(bins_shape, -1, dtype=np.int64)
-        self.distinct, self.n_frames, self.blocks = np.unique(counts), bins_shape[-1], blocks
+        self.distinct, self.blocks = np.unique(counts), blocks
         self.block_distinct = np.unique(blocks.counts)
-        self._seen: dict = {}  # (detector, criterion) -> sorted keys of the run, of the block, block index
+        self.clean = {c: _key(values, larger) for c, (values, larger) in clean.items()}  # per criterion
+        self.clean_sorted = {c: np.sort(key) for c, key in self.clean.items()}
+        self.clean_block_sorted = {c: [np.sort(key[b * blocks.block_frames:(b + 1) * blocks.block_frames])
+                                       for b in range(blocks.n_blocks)] for c, key in self.clean.items()}
+        self._seen: dict = {}  # (detector, criterion) -> sorted keys (noisy, clean) of the run, of the block,
+        # block index, moments of the rank pairs
 
     def guess(self, i: int, c: int, sl: slice, values: np.ndarray, larger_is_better: bool) -> None:
         """Guess the bins of detector ``i``'s frames ``sl`` by criterion ``c`` from their ``values``."""
-        key = np.asarray(values, dtype=np.float64) * (-1.0 if larger_is_better else 1.0)
-        key[np.isnan(key)] = np.inf
-        run, in_block, current = self._seen.get((i, c), (np.empty(0), np.empty(0), -1))
+        key, clean = _key(values, larger_is_better), self.clean[c][sl]
+        empty = np.empty(0)
+        run, run_clean, in_block, in_block_clean, current, moments = self._seen.get(
+            (i, c), (empty,) * 4 + (-1, np.zeros(6)))
         ties = _earlier_ties(run, key)
-        run = _merged(run, key)
-        smaller = np.searchsorted(run, key) * (self.n_frames / len(run))
-        self.run[i, c, sl] = _bins_of_rank(smaller + ties, self.distinct)
+        run, run_clean = _merged(run, key), _merged(run_clean, clean)
+        seen_below = np.searchsorted(run, key)
+        # how far the noise keeps the noiseless order: the correlation of the ranks among the seen frames
+        moments += _moments(seen_below / len(run), np.searchsorted(run_clean, clean) / len(run))
+        weight = _correlation(moments)
+        mapped = np.append(run_clean, np.inf)[seen_below]  # the noiseless key of the same rank
+        unseen_below = np.searchsorted(self.clean_sorted[c], mapped) - np.searchsorted(run_clean, mapped)
+        n_frames = len(self.clean_sorted[c])
+        rank = weight * (seen_below + unseen_below) + (1 - weight) * seen_below * (n_frames / len(run))
+        self.run[i, c, sl] = _bins_of_rank(rank + ties, self.distinct)
         blocks = self.blocks
         if blocks.n_blocks:
             block_of = np.arange(sl.start, sl.stop) // blocks.block_frames
             for b in np.unique(block_of[block_of < blocks.n_blocks]):
                 mine = block_of == b
-                in_block = in_block if b == current else np.empty(0)
+                if b != current:
+                    in_block, in_block_clean, current = empty, empty, b
                 ties = _earlier_ties(in_block, key[mine])
-                in_block = _merged(in_block, key[mine])
-                current = b
+                in_block, in_block_clean = _merged(in_block, key[mine]), _merged(in_block_clean, clean[mine])
+                in_block_below = np.searchsorted(in_block, key[mine])
+                unseen_below = (np.searchsorted(self.clean_block_sorted[c][b], mapped[mine])
+                                - np.searchsorted(in_block_clean, mapped[mine]))
                 ranked = in_block if len(in_block) >= self.MIN_IN_BLOCK else run
-                smaller = np.searchsorted(ranked, key[mine]) * (blocks.block_frames / len(ranked))
-                self.block[i, c, np.arange(sl.start, sl.stop)[mine]] = _bins_of_rank(smaller + ties,
-                                                                                      self.block_distinct)
-        self._seen[(i, c)] = (run, in_block, current)
+                plain = np.searchsorted(ranked, key[mine]) * (blocks.block_frames / len(ranked))
+                rank = weight * (in_block_below + unseen_below) + (1 - weight) * plain
+                self.block[i, c, np.arange(sl.start, sl.stop)[mine]] = _bins_of_rank(rank + ties, self.block_distinct)
+        self._seen[(i, c)] = (run, run_clean, in_block, in_block_clean, current, moments)
+
+
+def _moments(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """Sums (count, x, y, x^2, y^2, x y) of paired samples, for :func:`_correlation`."""
+    return np.array([len(x), x.sum(), y.sum(), x @ x, y @ y, x @ y])
+
+
+def _correlation(moments: np.ndarray) -> float:
+    """Pearson correlation of the samples of ``moments`` (:func:`_moments`), clipped to [0, 1]
+    (0 without spread)."""
+    n, sx, sy, sxx, syy, sxy = moments
+    var_x, var_y = n * sxx - sx * sx, n * syy - sy * sy
+    if not (var_x > 0 and var_y > 0):
+        return 0.0
+    return float(np.clip((n * sxy - sx * sy) / np.sqrt(var_x * var_y), 0.0, 1.0))
+
+
+def _key(values: np.ndarray, larger_is_better: bool) -> np.ndarray:
+    """Sort keys of criterion values as :func:`rank_frames` ranks them (best first, NaN last)."""
+    key = np.asarray(values, dtype=np.float64) * (-1.0 if larger_is_better else 1.0)
+    key[np.isnan(key)] = np.inf
+    return key
 
 
 def _earlier_ties(seen: np.ndarray, keys: np.ndarray) -> np.ndarray:
@@ -469,7 +540,20 @@ def run_lucky(iter_chunks: Callable[[], Iterable[tuple[int, np.ndarray]]], n_fra
     guessing = bool(late) and not all(d.noiseless for d in detectors)
     blocks = _Blocks(n_frames, n_blocks, fractions, n_det, n_crit, row0=n_crit * n_bins + 1,
                      resident=late if guessing else ())
-    guessed = _GuessedBins(bin_of_frame.shape, counts, blocks) if guessing else None
+    encircled = None
+
+    def encircled_of(n):
+        nonlocal encircled
+        if encircled is None:
+            encircled = EncircledEnergy(n)
+        return encircled
+
+    # pass 0 (guessing only): the noiseless frames' measures, the guesses' predictor (and the
+    # noiseless detectors' measures)
+    clean = _noiseless_measures(iter_chunks, n_frames, encircled_of, diffraction_limited_peak,
+                                progress_interval_s) if guessing else None
+    guessed = _GuessedBins(bin_of_frame.shape, counts, blocks, {
+        0: (clean[2], criteria[0][1]), 1: (clean[3], criteria[1][1])}) if guessing else None
 
     def assign_bins(crits):
         for i in range(n_det):
@@ -486,7 +570,7 @@ def run_lucky(iter_chunks: Callable[[], Iterable[tuple[int, np.ndarray]]], n_fra
     frame_d50_px = np.full((n_det, n_frames), np.nan)
     frame_centroid = np.full((n_det, n_frames, 2), np.nan)
     frame_flux = np.full((n_det, n_frames), np.nan)
-    encircled = long_none = partial = partial_noiseless = partial_rows = noiseless_rows = None
+    long_none = partial = partial_noiseless = partial_rows = noiseless_rows = None
     noise = buffer = None
     frame_window = window = None
     lc = n_crit * n_bins  # row of the recentred long exposure (all frames) in partial
@@ -494,8 +578,8 @@ def run_lucky(iter_chunks: Callable[[], Iterable[tuple[int, np.ndarray]]], n_fra
     progress = Progress("lucky pass 1/2: frames", n_frames, progress_interval_s)
     for start, frames in _chunks(iter_chunks, n_frames):
         k, n = len(frames), frames.shape[-1]
-        if encircled is None:
-            encircled = EncircledEnergy(n)
+        if long_none is None:
+            encircled = encircled_of(n)
             long_none = np.zeros((n_det, n, n))
             # images n^2 + 8 apart (not a power of two: no cache-set conflicts), viewed (n, n)
             n_rows = lc + 1 + blocks.prepare(k)
@@ -514,25 +598,27 @@ def run_lucky(iter_chunks: Callable[[], Iterable[tuple[int, np.ndarray]]], n_fra
         unit = np.ascontiguousarray(frames, dtype=np.float32)
         prepared = False
         for i, detector in enumerate(detectors):
-            if detector.noiseless:
+            if detector.noiseless and clean is not None:
                 detected = unit
-                rows, cols, peak = np.empty((k, n)), np.empty((k, n)), np.empty(k, np.float32)
-                kernels.frame_sums(unit, rows, cols, peak)
+                flux, centroids, frame_strehl[i, sl], frame_d50_px[i, sl] = (x[sl] for x in clean)
             else:
-                if noise is None or noise.max_frames < k:
-                    noise = KeyedNoise(n, max(k, 64))
-                    buffer = np.empty((noise.max_frames, n, n), np.float32)
-                if not prepared:
-                    noise.prepare(unit)
-                    prepared = True
-                detected, rows, cols, peak = noise.detect(detector, seed, start, buffer)
-            flux = rows.sum(axis=1)
-            if reference is None:
-                with np.errstate(invalid="ignore", divide="ignore"):
-                    centroids = np.stack([rows @ np.arange(n, dtype=np.float64) / flux,
-                                          cols @ np.arange(n, dtype=np.float64) / flux], axis=-1)
-                    frame_strehl[i, sl] = np.where(flux > 0, peak / (diffraction_limited_peak * flux), np.nan)
-                frame_d50_px[i, sl] = encircled.radius_px_binned(detected, centroids, flux=flux) * 2
+                if detector.noiseless:
+                    detected = unit
+                    rows, cols, peak = np.empty((k, n)), np.empty((k, n)), np.empty(k, np.float32)
+                    kernels.frame_sums(unit, rows, cols, peak)
+                else:
+                    if noise is None or noise.max_frames < k:
+                        noise = KeyedNoise(n, max(k, 64))
+                        buffer = np.empty((noise.max_frames, n, n), np.float32)
+                    if not prepared:
+                        noise.prepare(unit)
+                        prepared = True
+                    detected, rows, cols, peak = noise.detect(detector, seed, start, buffer)
+                if reference is None:
+                    flux, centroids, frame_strehl[i, sl], frame_d50_px[i, sl] = _measure(
+                        detected, rows, cols, peak, encircled, diffraction_limited_peak)
+                else:
+                    flux = rows.sum(axis=1)
             kernels.add_frames(detected, long_none[i])
             frame_flux[i, sl] = flux
             if reference is None:
