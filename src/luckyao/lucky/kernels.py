@@ -338,7 +338,7 @@ def frame_sums(frames, rows, cols, peak):  # pragma: no cover (jit)
     """Row and column sums ``rows``, ``cols`` (k, n) float64 and peaks ``peak`` (k,) of frames
     (k, n, n) float32, as :func:`detect_frames` gives them for the frames it draws."""
     for j in range(frames.shape[0]):
-        peak[j] = _finish(frames[j], frames[j, 0], np.float32(0.0), rows[j], cols[j])
+        peak[j] = _finish(frames[j], frames[j, 0], np.float32(0.0), rows[j], cols[j])  # sigma 0: reads only
 
 
 @numba.njit(cache=True, nogil=True)

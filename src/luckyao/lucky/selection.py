@@ -217,8 +217,7 @@ def _measure(frames: np.ndarray, rows: np.ndarray, cols: np.ndarray, peak: np.nd
 def _noiseless_measures(iter_chunks, n_frames: int, encircled_of: Callable[[int], EncircledEnergy],
                         diffraction_limited_peak: float, progress_interval_s: float) -> tuple[np.ndarray, ...]:
     """:func:`_measure` of every noiseless frame: flux, centroids, Strehl, d50 [pixel] (frame[, 2])."""
-    out = np.full(n_frames, np.nan), np.full((n_frames, 2), np.nan), np.full(n_frames, np.nan), np.full(
-        n_frames, np.nan)
+    out = tuple(np.full(shape, np.nan) for shape in (n_frames, (n_frames, 2), n_frames, n_frames))
     progress = Progress("lucky pass 0/2: noiseless frames", n_frames, progress_interval_s)
     for start, frames in _chunks(iter_chunks, n_frames):
         unit = np.ascontiguousarray(frames, dtype=np.float32)
@@ -362,17 +361,30 @@ class _GuessedBins:
         self.clean_sorted = {c: np.sort(key) for c, key in self.clean.items()}
         self.clean_block_sorted = {c: [np.sort(key[b * blocks.block_frames:(b + 1) * blocks.block_frames])
                                        for b in range(blocks.n_blocks)] for c, key in self.clean.items()}
-        self._seen: dict = {}  # (detector, criterion) -> sorted keys (noisy, clean) of the run, of the block,
-        # block index, moments of the rank pairs
+        self._seen: dict = {}  # (detector, criterion) -> sorted keys of the run, of the block, block, moments
+        self._clean_seen: dict = {}  # criterion -> frames seen, their sorted noiseless keys, of each block
+
+    def _seen_clean(self, c: int, stop: int) -> tuple[np.ndarray, dict]:
+        """Sorted noiseless keys of criterion ``c`` of the frames before ``stop`` (seen so far: the
+        same for every detector), of the run and of each block; updated once per chunk."""
+        seen, run, in_block = self._clean_seen.get(c, (0, np.empty(0), {}))
+        if stop != seen:
+            keys = self.clean[c][seen:stop]
+            run = _merged(run, keys)
+            block_of = np.arange(seen, stop) // max(self.blocks.block_frames, 1)
+            for b in np.unique(block_of[block_of < self.blocks.n_blocks]):
+                in_block[b] = _merged(in_block.get(b, np.empty(0)), keys[block_of == b])
+            self._clean_seen[c] = (stop, run, in_block)
+        return run, in_block
 
     def guess(self, i: int, c: int, sl: slice, values: np.ndarray, larger_is_better: bool) -> None:
         """Guess the bins of detector ``i``'s frames ``sl`` by criterion ``c`` from their ``values``."""
         key, clean = _key(values, larger_is_better), self.clean[c][sl]
         empty = np.empty(0)
-        run, run_clean, in_block, in_block_clean, current, moments = self._seen.get(
-            (i, c), (empty,) * 4 + (-1, np.zeros(6)))
+        run, in_block, current, moments = self._seen.get((i, c), (empty, empty, -1, np.zeros(6)))
+        run_clean, in_block_clean = self._seen_clean(c, sl.stop)
         ties = _earlier_ties(run, key)
-        run, run_clean = _merged(run, key), _merged(run_clean, clean)
+        run = _merged(run, key)
         seen_below = np.searchsorted(run, key)
         # how far the noise keeps the noiseless order: the correlation of the ranks among the seen frames
         moments += _moments(seen_below / len(run), np.searchsorted(run_clean, clean) / len(run))
@@ -388,17 +400,17 @@ class _GuessedBins:
             for b in np.unique(block_of[block_of < blocks.n_blocks]):
                 mine = block_of == b
                 if b != current:
-                    in_block, in_block_clean, current = empty, empty, b
+                    in_block, current = empty, b
                 ties = _earlier_ties(in_block, key[mine])
-                in_block, in_block_clean = _merged(in_block, key[mine]), _merged(in_block_clean, clean[mine])
+                in_block = _merged(in_block, key[mine])
                 in_block_below = np.searchsorted(in_block, key[mine])
                 unseen_below = (np.searchsorted(self.clean_block_sorted[c][b], mapped[mine])
-                                - np.searchsorted(in_block_clean, mapped[mine]))
+                                - np.searchsorted(in_block_clean[b], mapped[mine]))
                 ranked = in_block if len(in_block) >= self.MIN_IN_BLOCK else run
                 plain = np.searchsorted(ranked, key[mine]) * (blocks.block_frames / len(ranked))
                 rank = weight * (in_block_below + unseen_below) + (1 - weight) * plain
                 self.block[i, c, np.arange(sl.start, sl.stop)[mine]] = _bins_of_rank(rank + ties, self.block_distinct)
-        self._seen[(i, c)] = (run, run_clean, in_block, in_block_clean, current, moments)
+        self._seen[(i, c)] = (run, in_block, current, moments)
 
 
 def _moments(x: np.ndarray, y: np.ndarray) -> np.ndarray:
@@ -582,6 +594,18 @@ def run_lucky(iter_chunks: Callable[[], Iterable[tuple[int, np.ndarray]]], n_fra
     long_none = partial = partial_noiseless = partial_rows = noiseless_rows = None
     noise = buffer = None
     frame_window = window = None
+
+    def prepare_noise(unit):
+        """The noise of a chunk of unit-flux frames made ready for the noisy detectors, if any."""
+        nonlocal noise, buffer
+        if all(d.noiseless for d in detectors):
+            return
+        k, n = unit.shape[:2]
+        if noise is None or noise.max_frames < k:
+            noise = KeyedNoise(n, max(k, 64))
+            buffer = np.empty((noise.max_frames, n, n), np.float32)
+        noise.prepare(unit)
+
     lc = n_crit * n_bins  # row of the recentred long exposure (all frames) in partial
     row_of = np.arange(n_crit) * n_bins  # first row of each criterion
     progress = Progress("lucky pass 1/2: frames", n_frames, progress_interval_s)
@@ -605,29 +629,22 @@ def run_lucky(iter_chunks: Callable[[], Iterable[tuple[int, np.ndarray]]], n_fra
                 shifts = np.zeros((n_det, n_frames, 2), dtype=np.int64)
         sl = slice(start, start + k)
         unit = np.ascontiguousarray(frames, dtype=np.float32)
-        prepared = False
+        prepare_noise(unit)
         for i, detector in enumerate(detectors):
-            if detector.noiseless and clean is not None:
-                detected = unit
-                flux, centroids, frame_strehl[i, sl], frame_d50_px[i, sl] = (x[sl] for x in clean)
+            if detector.noiseless and clean is not None:  # measured in pass 0
+                detected, measures = unit, [x[sl] for x in clean]
             else:
                 if detector.noiseless:
                     detected = unit
                     rows, cols, peak = np.empty((k, n)), np.empty((k, n)), np.empty(k, np.float32)
                     kernels.frame_sums(unit, rows, cols, peak)
                 else:
-                    if noise is None or noise.max_frames < k:
-                        noise = KeyedNoise(n, max(k, 64))
-                        buffer = np.empty((noise.max_frames, n, n), np.float32)
-                    if not prepared:
-                        noise.prepare(unit)
-                        prepared = True
                     detected, rows, cols, peak = noise.detect(detector, seed, start, buffer)
-                if reference is None:
-                    flux, centroids, frame_strehl[i, sl], frame_d50_px[i, sl] = _measure(
-                        detected, rows, cols, peak, encircled, diffraction_limited_peak)
-                else:
-                    flux = rows.sum(axis=1)
+                measures = (_measure(detected, rows, cols, peak, encircled, diffraction_limited_peak)
+                            if reference is None else [rows.sum(axis=1)])
+            flux = measures[0]
+            if reference is None:
+                centroids, frame_strehl[i, sl], frame_d50_px[i, sl] = measures[1:]
             kernels.add_frames(detected, long_none[i])
             frame_flux[i, sl] = flux
             if reference is None:
@@ -665,10 +682,7 @@ def run_lucky(iter_chunks: Callable[[], Iterable[tuple[int, np.ndarray]]], n_fra
             k = len(frames)
             sl = slice(start, start + k)
             unit = np.ascontiguousarray(frames, dtype=np.float32)
-            prepared = False
-            if noise is not None and noise.max_frames < k:
-                noise = KeyedNoise(n, k)
-                buffer = np.empty((k, n, n), np.float32)
+            prepare_noise(unit)
             for i, detector in enumerate(detectors):
                 rows_late = _rows(row_of[late], bin_of_frame[i, late, sl].T)  # (k, late)
                 rows_block = blocks.rows(i, late, sl)
@@ -683,9 +697,6 @@ def run_lucky(iter_chunks: Callable[[], Iterable[tuple[int, np.ndarray]]], n_fra
                 if not drawn.any():
                     continue
                 n_drawn[i] += np.count_nonzero(drawn)
-                if not prepared:
-                    noise.prepare(unit)
-                    prepared = True
                 detected, rows, _, _ = noise.detect(detector, seed, start, buffer, drawn)
                 if not np.array_equal(rows[drawn].sum(axis=1), frame_flux[i, sl][drawn]):
                     raise RuntimeError(f"frames {start}.. differ between the two passes")
