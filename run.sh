@@ -27,27 +27,11 @@ shift || true
 case "$command" in
     study)
         setup
-        # After a hard kill Snakemake keeps its lock and jobs leave *.partial files:
-        # when no Snakemake of this checkout is running, clear both before starting
-        # (in the study folder: this one, or the one given by -d / --directory).
-        local_dir=.
-        args=("$@")
-        for ((i = 0; i < ${#args[@]}; i++)); do
-            case "${args[i]}" in
-                -d|--directory) local_dir="${args[i + 1]:-.}" ;;
-                --directory=*) local_dir="${args[i]#--directory=}" ;;
-            esac
-        done
-        # (matched by this checkout's absolute path: another checkout's runs do not count)
-        snakemake="$PWD/$VENV/bin/snakemake"
-        if ! pgrep -f "$snakemake" > /dev/null; then
-            if [ -n "$(ls -A "$local_dir/.snakemake/locks" 2> /dev/null)" ]; then
-                echo "luckyao: no Snakemake is running here; removing the stale lock of a killed run" >&2
-                "$snakemake" --unlock -d "$local_dir" > /dev/null
-            fi
-            find "$local_dir/results" -name '*.partial' -delete 2> /dev/null || true
-        fi
-        exec "$snakemake" "$@"
+        # After a hard kill Snakemake keeps its lock and jobs leave *.partial files: both
+        # are cleared when no run of the workflow uses the study folder (this one, or -d /
+        # --directory in any form): every Snakemake of the workflow holds a lock on it
+        # (src/luckyao/study/live_run.py), however started. Then Snakemake runs.
+        exec "$VENV/bin/python" -m luckyao.study.live_run "$@"
         ;;
     test)
         setup

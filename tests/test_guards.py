@@ -93,3 +93,30 @@ def test_every_problem_is_reported_one_line_each():
     assert any("cases.good.atmosphere.r0_500nm_m" in line for line in lines)
     assert any("cases.bad.ao.mode" in line for line in lines)
     assert any("figures.quality.detector" in line for line in lines)
+
+
+@pytest.mark.parametrize("name", ["..", ".", "-x", "../../X", "q$(touch PWNED)", "a b", "<script>", "a/b", "x..y"])
+@pytest.mark.parametrize("kind", ["case", "figure", "detector"])
+def test_an_unsafe_name_is_refused_naming_its_key(kind, name):
+    """Names become file names and command-line words: one pattern for cases, figures and
+    detectors (a letter or digit first; letters, digits, _ . + -; never '..')."""
+    study = tiny()
+    if kind == "case":
+        study["cases"][name] = {}
+        key = "cases"
+    elif kind == "figure":
+        study["figures"][name] = study["figures"]["longexp"]
+        key = "figures"
+    else:
+        study["lucky"]["detectors"][name] = {"photons_per_frame": None, "read_noise_e": 0.0}
+        key = "lucky.detectors"
+    with pytest.raises(ConfigError, match=rf"config key '{key}': .* is not a safe name"):
+        validate_study(study)
+
+
+def test_the_safe_names_of_the_studies_pass():
+    for path in (TINY, TINY.parents[2] / "config" / "config.yaml"):
+        validate_study(yaml.safe_load(path.read_text()))
+    study = tiny()
+    study["cases"]["ltao_r0_13.5cm+glao-2"] = {}
+    validate_study(study)

@@ -194,3 +194,33 @@ def test_a_command_line_override_is_applied_not_ignored(finished_run):
     assert {"turbulence", "simulate", "lucky", "figure"} <= rules
     refused = snakemake(workdir, "--dry-run", "--config", "seed=-1")
     assert refused.returncode != 0 and "config key 'seed'" in refused.stdout + refused.stderr
+
+
+def test_names_that_would_reach_the_shell_or_leave_the_folder_create_nothing(tmp_path):
+    """A figure named to run a command or to write outside the study folder (an asterism
+    figure: its job needs no other job) is refused before any job: nothing is created."""
+    study = yaml.safe_load(TINY.read_text())
+    asterism = {"kind": "asterism", "cases": ["lgs"], "layer_heights_m": [0, 5000]}
+    study["figures"] = {"q$(touch PWNED)": asterism, "../../X": asterism}
+    workdir = tmp_path / "a" / "b"
+    write_config(workdir, study)
+    result = snakemake(workdir)
+    assert result.returncode != 0
+    assert "is not a safe name" in result.stdout + result.stderr
+    created = sorted(p.relative_to(tmp_path) for p in tmp_path.rglob("*") if not p.is_dir())
+    assert [p for p in created if ".snakemake" not in p.parts] == [Path("a/b/config/config.yaml")]
+
+
+def test_every_value_formatted_into_a_shell_command_is_quoted():
+    """Each ``{...}`` of every rule's shell command is quoted (``:q``), but the command
+    prefix (quoted where it is made) and the integers."""
+    import re
+
+    unquoted, checked = {"LUCKYAO", "threads", "params.seed"}, 0
+    for path in sorted((REPO / "workflow" / "rules").glob("*.smk")):
+        text = path.read_text()
+        for shell in re.findall(r"shell:\n((?:\s+\".*\"\n?)+)", text):
+            for field in re.findall(r"\{([^{}]+)\}", shell):
+                assert field.endswith(":q") or field in unquoted, f"{path.name}: {{{field}}} is not quoted"
+                checked += 1
+    assert checked >= 25

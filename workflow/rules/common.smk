@@ -1,11 +1,15 @@
 # Study config, validated once at the edge; lookups the rules share. No physics here.
 import re
+import shlex
 import sys
 
 from luckyao.study.code_deps import step_sources
+from luckyao.study.live_run import hold_shared
 from luckyao.study.config import (ConfigError, canonical_json, commands_key, commands_spec, imaged_targets,
                                   lucky_settings, reconstructor_key, reconstructor_spec, sweep_detectors,
                                   turbulence_key, turbulence_spec, validate_study)
+
+RUN_LOCK = hold_shared()  # this study folder is in use until this Snakemake exits (run.sh cleans up only when free)
 
 try:
     CASES = validate_study(config)
@@ -19,7 +23,8 @@ RECONSTRUCTOR = {name: reconstructor_spec(case) for name, case in CASES.items()}
 RECONSTRUCTOR_BY_KEY = {reconstructor_key(s): s for s in RECONSTRUCTOR.values() if s is not None}
 COMMANDS = {name: commands_spec(case) for name, case in CASES.items()}
 COMMANDS_BY_KEY = {commands_key(s): s for s in COMMANDS.values() if s is not None}
-LUCKYAO = f"OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1 NUMBA_NUM_THREADS=1 {sys.executable} -m luckyao"
+LUCKYAO = ("OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1 NUMBA_NUM_THREADS=1 "
+           f"{shlex.quote(sys.executable)} -m luckyao")  # every value formatted into a command is quoted (:q)
 
 
 def reconstructor_file(case):

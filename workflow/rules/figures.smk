@@ -14,6 +14,7 @@ rule figure:
         data="figures/{fig}.nc",
     params:
         settings=lambda w: canonical_json(figure_settings(w.fig)),
+        prefix=lambda w: f"figures/{w.fig}",
     threads: 1
     resources:
         mem_mb=1500,  # at most 1 GB measured
@@ -22,5 +23,5 @@ rule figure:
         "logs/figures/{fig}.log",
     shell:
         "{LUCKYAO} figure --id {wildcards.fig:q} --settings {params.settings:q}"
-        " --out-prefix figures/{wildcards.fig} {input.lucky} 2> {log}"
+        " --out-prefix {params.prefix:q} {input.lucky:q} 2> {log:q}"
 

@@ -9,7 +9,7 @@ rule lucky:
         "results/cases/{case}/lucky.nc",
     params:
         settings=lambda w: canonical_json(lucky_settings(STUDY, CASES, w.case)),
-        replay=lambda w, input: f"--screens {input.replay[0]} --screens-metadata {input.replay[1]}" if input.replay else "",
+        replay=lambda w, input: ["--screens", input.replay[0], "--screens-metadata", input.replay[1]] if input.replay else [],
     threads: 1
     priority: 10  # a finished simulation's frame cube is post-processed (and, if temporary, deleted) first
     resources:
@@ -20,6 +20,6 @@ rule lucky:
     benchmark:
         "results/benchmarks/lucky/{case}.tsv"
     shell:
-        "{LUCKYAO} lucky --settings {params.settings:q} --frames {input.frames}"
-        " --telemetry {input.telemetry} --out {output} {params.replay} 2> {log}"
+        "{LUCKYAO} lucky --settings {params.settings:q} --frames {input.frames:q}"
+        " --telemetry {input.telemetry:q} --out {output:q} {params.replay:q} 2> {log:q}"
 

@@ -16,7 +16,7 @@ rule reconstructor:
     benchmark:
         "results/benchmarks/reconstructor/{rkey}.tsv"
     shell:
-        "{LUCKYAO} reconstructor --spec {params.spec:q} --out {output} 2> {log}"
+        "{LUCKYAO} reconstructor --spec {params.spec:q} --out {output:q} 2> {log:q}"
 
 
 rule commands:
@@ -37,4 +37,4 @@ rule commands:
     benchmark:
         "results/benchmarks/commands/{ckey}.tsv"
     shell:
-        "{LUCKYAO} commands --spec {params.spec:q} --out {output} 2> {log}"
+        "{LUCKYAO} commands --spec {params.spec:q} --out {output:q} 2> {log:q}"

@@ -12,6 +12,8 @@ rule simulate:
     params:
         case=lambda w: canonical_json(CASES[w.case]),
         seed=STUDY["seed"],
+        products=lambda w, input: ((["--reconstructor", input.reconstructor] if input.reconstructor else [])
+                                   + (["--commands", input.commands] if input.commands else [])),
     threads: 1
     priority: lambda w: simulate_priority(w.case)
     resources:
@@ -23,6 +25,5 @@ rule simulate:
         "results/benchmarks/simulate/{case}.tsv"
     shell:
         "{LUCKYAO} simulate --case {params.case:q} --name {wildcards.case:q} --seed {params.seed}"
-        " --screens {input.screens} --screens-metadata {input.screens_metadata}"
-        " --reconstructor '{input.reconstructor}' --commands '{input.commands}'"
-        " --frames {output.frames} --telemetry {output.telemetry} 2> {log}"
+        " --screens {input.screens:q} --screens-metadata {input.screens_metadata:q}"
+        " {params.products:q} --frames {output.frames:q} --telemetry {output.telemetry:q} 2> {log:q}"

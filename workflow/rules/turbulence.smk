@@ -16,5 +16,5 @@ rule turbulence:
     benchmark:
         "results/benchmarks/turbulence/{key}.tsv"
     shell:
-        "{LUCKYAO} turbulence --spec {params.spec:q} --screens {output.screens}"
-        " --metadata {output.metadata} --threads {threads} 2> {log}"
+        "{LUCKYAO} turbulence --spec {params.spec:q} --screens {output.screens:q}"
+        " --metadata {output.metadata:q} --threads {threads} 2> {log:q}"

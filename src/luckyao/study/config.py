@@ -51,12 +51,20 @@ def _key_path(prefix: str, error: jsonschema.ValidationError) -> str:
     return ".".join(parts) or "(top level)"
 
 
+def _message(error: jsonschema.ValidationError) -> str:
+    """The schema's message, or for a name (``definitions.name``) what a safe name is."""
+    if error.validator == "pattern" and error.schema.get("description", "").startswith("a case, figure or detector"):
+        return (f"{error.instance!r} is not a safe name (a letter or digit, then letters, digits, _ . + -; "
+                "never '..'): names become file names and command-line words")
+    return error.message
+
+
 def _validate(instance, schema: dict, prefix: str) -> None:
     """Every schema violation of ``instance``, one line each, naming its key."""
     validator = jsonschema.Draft7Validator(schema)
     errors = sorted(validator.iter_errors(instance), key=lambda e: list(e.absolute_path))
     if errors:
-        raise ConfigError("\n".join(f"config key '{_key_path(prefix, e)}': {e.message}" for e in errors))
+        raise ConfigError("\n".join(f"config key '{_key_path(prefix, e)}': {_message(e)}" for e in errors))
 
 
 def _check_finite(value, where: str) -> None:

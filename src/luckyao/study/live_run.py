@@ -1,0 +1,87 @@
+"""One study folder, one run: the lock every run of the workflow holds, and the
+cleanup after a hard kill that it makes safe.
+
+Every Snakemake that parses this workflow holds a shared ``flock`` on
+``.snakemake/luckyao-run.lock`` in its study folder from its start to its exit
+(``hold_shared``, called by ``workflow/rules/common.smk``), however it was
+started: ``bash run.sh study``, ``.venv/bin/snakemake`` by any path or symlink,
+``python -m snakemake``. The kernel releases the lock when the process ends, a
+``SIGKILL`` included. ``bash run.sh study`` (``main``) asks for it exclusively,
+without waiting: granted, no run uses the folder, so a killed run's Snakemake
+lock and its jobs' ``*.partial`` files are stale and removed; refused, a run is
+live and nothing is touched. The lock is then turned shared and kept across
+``exec`` into Snakemake, so the folder is never seen idle while it starts.
+"""
+
+import contextlib
+import fcntl
+import io
+import os
+import sys
+from pathlib import Path
+
+LOCK_FILE = Path(".snakemake") / "luckyao-run.lock"
+
+
+def _open_lock(folder: Path) -> int:
+    path = folder / LOCK_FILE
+    path.parent.mkdir(parents=True, exist_ok=True)
+    return os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+
+
+def hold_shared(folder=".") -> int:
+    """Hold the study folder's run lock shared until this process exits (waits only
+    while ``run.sh`` cleans up); returns the descriptor (keep it open)."""
+    fd = _open_lock(Path(folder))
+    fcntl.flock(fd, fcntl.LOCK_SH)
+    return fd
+
+
+def study_folder(argv: list[str]) -> Path | None:
+    """The study folder of a Snakemake command line, parsed by Snakemake's own parser
+    (``-d DIR``, ``-dDIR``, ``--directory DIR``, ``--directory=DIR``, abbreviations,
+    profiles); ``None`` when it does not parse (Snakemake then reports it)."""
+    from snakemake.cli import parse_args
+
+    try:
+        with contextlib.redirect_stderr(io.StringIO()), contextlib.redirect_stdout(io.StringIO()):
+            _, args = parse_args(argv)
+    except (SystemExit, Exception):  # noqa: BLE001 - any parse failure: Snakemake itself reports it
+        return None
+    return Path(args.directory or ".")
+
+
+def clean_if_idle(folder: Path, echo=print) -> int:
+    """Take the folder's run lock exclusively if free and then remove a killed run's
+    stale Snakemake lock and ``results/**/*.partial`` files; returns the lock's
+    descriptor, held shared either way."""
+    fd = _open_lock(folder)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        echo(f"luckyao: a run of the workflow is using {folder}; its lock and files are left alone")
+        fcntl.flock(fd, fcntl.LOCK_SH)
+        return fd
+    locks = [p for p in (folder / ".snakemake" / "locks").glob("*") if p.is_file()]
+    if locks:
+        echo("luckyao: no Snakemake is running here; removing the stale lock of a killed run")
+        for path in locks:
+            path.unlink(missing_ok=True)
+    for path in (folder / "results").rglob("*.partial"):
+        path.unlink(missing_ok=True)
+    fcntl.flock(fd, fcntl.LOCK_SH)
+    return fd
+
+
+def main(argv: list[str]) -> None:
+    """``bash run.sh study ARGS``: clean up if the study folder is idle, then become
+    ``python -m snakemake ARGS`` holding the folder's run lock."""
+    folder = study_folder(argv)
+    if folder is not None and folder.is_dir():
+        fd = clean_if_idle(folder, echo=lambda line: print(line, file=sys.stderr))
+        os.set_inheritable(fd, True)
+    os.execv(sys.executable, [sys.executable, "-m", "snakemake", *argv])
+
+
+if __name__ == "__main__":
+    main(sys.argv[1:])
