@@ -2,11 +2,14 @@
 results, figures, versions and checksums; ``luckyao verify`` checks them and reruns a case,
 and fails naming the member, or the file and variable, when anything differs."""
 
+import gzip
 import hashlib
 import io
 import json
 import subprocess
 import sys
+import tarfile
+import tempfile
 from contextlib import redirect_stdout
 from pathlib import Path
 
@@ -15,16 +18,10 @@ import pytest
 import xarray as xr
 import yaml
 
-from luckyao.study.archive import (
-    CHECKSUMS,
-    checksum_list,
-    compare_variables,
-    read_members,
-    runtime_packages,
-    write_members,
-)
+from luckyao.study.archive import CHECKSUMS, checksum_list, read_members, runtime_packages, write_members
 from luckyao.study.cli import main
 from luckyao.study.config import validate_study
+from luckyao.study.verify import MEMBER_LIMIT_BYTES, compare_variables
 
 REPO = Path(__file__).resolve().parents[1]
 TINY = REPO / "tests" / "data" / "tiny.yaml"
@@ -190,3 +187,78 @@ def test_compare_states_agreement_per_variable():
     assert rows["x"] == (False, "DIFFERS") and not rows["gone"][0] and rows["new"][0]
     exact = {name: agrees for name, agrees, _ in compare_variables(fresh, archived, 0.0, 0.0)}
     assert exact["a"] and not exact["b"]
+
+
+def test_verify_names_a_changed_case_it_does_not_rerun_only_with_all_cases(archive, verified, tmp_path, capsys):
+    """With ``SHA256SUMS`` rewritten, a changed ``lucky.nc`` of a case other than the one
+    rerun passes (the checksums are no signature); ``--all-cases`` reruns it and fails."""
+    _, _, workdir = verified
+    member = "results/cases/bad/lucky.nc"
+    original = tmp_path / "lucky.nc"
+    original.write_bytes(read_members(archive)[member])
+    with xr.open_dataset(original) as ds:
+        changed = ds.load()
+    changed["strehl"].values[...] *= 1 + 1e-5
+    changed.to_netcdf(tmp_path / "changed.nc")
+    path = rewritten(archive, tmp_path / "e.tar", {member: (tmp_path / "changed.nc").read_bytes()}, True)
+    code, output = verify(capsys, path, "--case", "good", "--workdir", workdir)
+    assert code == 0, output
+    code, output = verify(capsys, path, "--all-cases", "--workdir", workdir)
+    assert code == 1, output
+    assert f"FAILED: {member}: strehl: max abs diff" in output and "results/cases/good/lucky.nc: strehl: identical" in output
+
+
+def test_a_corrupt_member_of_the_rerun_case_is_named_and_its_scratch_folder_removed(archive, tmp_path, capsys,
+                                                                                   monkeypatch):
+    member = "results/cases/good/telemetry.nc"
+    path = rewritten(archive, tmp_path / "f.tar", {member: b"not a netCDF file"}, True)
+    scratch = tmp_path / "scratch"
+    scratch.mkdir()
+    monkeypatch.setattr(tempfile, "tempdir", str(scratch))
+    code, output = verify(capsys, path, "--case", "good")
+    assert code == 1, output
+    assert f"FAILED: {member}: unreadable" in output and "Traceback" not in output
+    assert list(scratch.iterdir()) == []
+
+
+class Zeros(io.RawIOBase):
+    """``n`` zero bytes, never held."""
+
+    def __init__(self, n: int):
+        self.left = n
+
+    def readable(self):
+        return True
+
+    def readinto(self, buffer):
+        k = min(len(buffer), self.left)
+        buffer[:k] = bytes(k)
+        self.left -= k
+        return k
+
+
+def test_verify_reads_a_tar_bomb_in_bounded_memory(tmp_path):
+    """A 1.5 MB ``.tar.gz`` holding a 320 MiB member: hashed as a stream (peak memory grows
+    by less than 100 MB; reading it whole took 320 MB), refused as not in SHA256SUMS."""
+    bomb, size = tmp_path / "bomb.tar.gz", 320 << 20
+    with tarfile.open(bomb, "w:gz", compresslevel=1) as tar:
+        tar.addfile(tarfile.TarInfo(f"bomb/{CHECKSUMS}"), io.BytesIO(b""))
+        info = tarfile.TarInfo("bomb/results/cases/good/lucky.nc")
+        info.size = size
+        tar.addfile(info, io.BufferedReader(Zeros(size)))
+    script = ("import resource, sys; from luckyao.study.cli import main; import luckyao.study.verify; "
+              "before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss; code = main(['verify', sys.argv[1]]); "
+              "print(code, resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - before)")
+    result = subprocess.run([sys.executable, "-c", script, str(bomb)], capture_output=True, text=True, timeout=300)
+    code, growth_kib = map(int, result.stdout.split()[-2:])
+    assert code == 1 and "results/cases/good/lucky.nc: not in SHA256SUMS" in result.stdout, result.stdout
+    assert growth_kib < 100_000, f"peak memory grew by {growth_kib / 1024:.0f} MiB"
+
+
+def test_verify_refuses_unread_a_member_larger_than_any_archived_file(tmp_path, capsys):
+    header = tarfile.TarInfo("big/results/cases/good/lucky.nc")
+    header.size = MEMBER_LIMIT_BYTES + 1
+    path = tmp_path / "big.tar.gz"
+    path.write_bytes(gzip.compress(header.tobuf(format=tarfile.GNU_FORMAT) + bytes(4096)))
+    code, output = verify(capsys, path)
+    assert code == 1 and "member results/cases/good/lucky.nc claims 2,147,483,649 bytes" in output

@@ -3,6 +3,7 @@ incremental reruns and config errors."""
 
 import json
 import os
+import re
 import shutil
 import signal
 import subprocess
@@ -214,8 +215,6 @@ def test_names_that_would_reach_the_shell_or_leave_the_folder_create_nothing(tmp
 def test_every_value_formatted_into_a_shell_command_is_quoted():
     """Each ``{...}`` of every rule's shell command is quoted (``:q``), but the command
     prefix (quoted where it is made) and the integers."""
-    import re
-
     unquoted, checked = {"LUCKYAO", "threads", "params.seed"}, 0
     for path in sorted((REPO / "workflow" / "rules").glob("*.smk")):
         text = path.read_text()
@@ -224,3 +223,22 @@ def test_every_value_formatted_into_a_shell_command_is_quoted():
                 assert field.endswith(":q") or field in unquoted, f"{path.name}: {{{field}}} is not quoted"
                 checked += 1
     assert checked >= 25
+
+
+@pytest.mark.parametrize("what", ["duration", "wfs"])
+def test_a_study_too_large_for_this_machine_is_refused_before_any_job(tmp_path, what):
+    """1e7 s of screens (1.2 TB) or a 1000 x 1000 WFS (its slope covariance alone 8e14 bytes)
+    is refused with the job and the numbers, in seconds, before any job (a dry run: on
+    the old code this planned the jobs)."""
+    study = yaml.safe_load(TINY.read_text())
+    if what == "duration":
+        study["turbulence"]["duration_s"] = study["base"]["duration_s"] = 1e7
+        expected = r"job turbulence screens_\w+ writes results/turbulence/screens_\w+\.npy of about [\d,.]+ GB"
+    else:
+        study["cases"]["lgs"]["wfs"] = {"n_subapertures": 1000}
+        expected = r"job reconstructor reconstructor_\w+ needs about [\d,.]+ GB of memory, more than the [\d,.]+ GB"
+    write_config(tmp_path, study)
+    result = snakemake(tmp_path, "--dry-run")
+    assert result.returncode != 0
+    assert re.search(expected, result.stdout + result.stderr), result.stderr[-2000:]
+    assert not (tmp_path / "results").exists()

@@ -5,6 +5,9 @@ import sys
 
 from luckyao.study.code_deps import step_sources
 from luckyao.study.live_run import hold_shared
+from luckyao.study.resources import (commands_memory_bytes, lucky_memory_bytes, machine_memory_bytes, mem_mb,
+                                     preflight, reconstructor_memory_bytes, simulate_memory_bytes,
+                                     turbulence_memory_bytes)
 from luckyao.study.config import (ConfigError, canonical_json, commands_key, commands_spec, imaged_targets,
                                   lucky_settings, reconstructor_key, reconstructor_spec, sweep_detectors,
                                   turbulence_key, turbulence_spec, validate_study)
@@ -16,6 +19,12 @@ try:
 except ConfigError as err:
     sys.exit("\n".join(f"luckyao: invalid study config: {problem}" for problem in str(err).splitlines()))
 STUDY = config
+# Before any job: every job's memory within this machine's (or --resources mem_mb=N, e.g. a
+# cluster's nodes), every file it writes within the free disk (src/luckyao/study/resources.py).
+GIVEN_MEM_MB = getattr(workflow.global_resources.get("mem_mb"), "value", None)  # a snakemake Resource
+MEMORY_LIMIT_BYTES = max(machine_memory_bytes(), 1e6 * GIVEN_MEM_MB if isinstance(GIVEN_MEM_MB, (int, float)) else 0)
+if problems := preflight(STUDY, CASES, memory_bytes=MEMORY_LIMIT_BYTES):
+    sys.exit("\n".join(f"luckyao: study too large: {problem}" for problem in problems))
 
 TURBULENCE = {name: turbulence_spec(STUDY, case) for name, case in CASES.items()}
 TURBULENCE_BY_KEY = {turbulence_key(spec): spec for spec in TURBULENCE.values()}
@@ -93,10 +102,10 @@ def simulate_priority(case):
 
 
 def lucky_mem_mb(case):
-    """Memory a case's lucky job may hold [MB] at paper fidelity (10 time blocks): about
-    1.5 GB plus 0.21 GB of partial sums per detector (the sweep's 19 detectors: 4.7 GB
+    """Memory a case's lucky job may hold [MB] at paper fidelity (10 time blocks): its
+    estimate as is (``resources.lucky_memory_bytes``: the sweep's 19 detectors, 4.7 GB
     measured), at least 3 GB (a field's replay; its memory-mapped screens not counted)."""
-    return max(3000, 1500 + 210 * len(lucky_settings(STUDY, CASES, case)["detectors"]))
+    return mem_mb(lucky_memory_bytes(lucky_settings(STUDY, CASES, case)), 3000, margin=1.0)
 
 
 def replay_screens(case):

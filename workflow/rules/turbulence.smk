@@ -9,7 +9,7 @@ rule turbulence:
         spec=lambda w: canonical_json(TURBULENCE_BY_KEY[w.key]),
     threads: 2  # two layers at once (independent draws: the same screens for any number)
     resources:
-        mem_mb=16000,  # paper fidelity: 12 bytes per sample of the two largest layers, 11.8 GB
+        mem_mb=lambda w: mem_mb(turbulence_memory_bytes(TURBULENCE_BY_KEY[w.key])),  # paper fidelity: 15800
         runtime=15,  # minutes; paper fidelity: 5 measured
     log:
         "logs/turbulence/{key}.log",

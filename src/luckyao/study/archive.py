@@ -1,4 +1,4 @@
-"""Archived reproducibility runs: one file per finished study, and its verification.
+"""Archived reproducibility runs: one file per finished study (verified by ``verify.py``).
 
 ``archive`` packs a finished study into one tar file (members under one folder):
 ``config.yaml``, the resolved study config (the config files merged as Snakemake
@@ -9,12 +9,6 @@ git commit, Python, platform, CPU, config hash, cases, figures), with ``code.dif
 when the checkout has uncommitted changes; and ``SHA256SUMS``, the checksum of
 every other member (``sha256sum -c SHA256SUMS`` checks an extracted archive
 without luckyao). Frame cubes and phase screens are not archived (GB; rerun them).
-
-``verify`` checks every checksum, warns when this environment or code differs from
-the archived one, reruns one case with Snakemake from the archived config in a
-scratch folder (by default the one whose jobs took least time when archived) and
-compares every variable of its fresh ``lucky.nc`` and ``telemetry.nc`` with the
-archived ones: identical, within a tolerance, or different.
 """
 
 import datetime
@@ -22,18 +16,13 @@ import hashlib
 import io
 import json
 import platform
-import shutil
 import subprocess
-import sys
 import tarfile
-import tempfile
 import time
 from importlib import metadata
 from pathlib import Path
 
 import netCDF4
-import numpy as np
-import xarray as xr
 import yaml
 
 from .. import __version__
@@ -41,7 +30,6 @@ from .config import (
     canonical_json,
     commands_key,
     commands_spec,
-    frame_count,
     load_study,
     lucky_settings,
     reconstructor_key,
@@ -49,7 +37,6 @@ from .config import (
     sha256,
     turbulence_key,
     turbulence_spec,
-    validate_study,
 )
 from .datasets import atomic_path, code_version
 
@@ -185,7 +172,8 @@ def write_members(path, members: dict[str, bytes]) -> None:
 
 
 def read_members(path) -> dict[str, bytes]:
-    """Name (without the top folder) -> bytes of every file in the archive ``path``."""
+    """Name (without the top folder) -> bytes of every file in the archive ``path``, all
+    held in memory (for a trusted archive; ``verify`` streams instead)."""
     try:
         with tarfile.open(path, "r:*") as tar:
             return {info.name.partition("/")[2]: tar.extractfile(info).read() for info in tar if info.isfile()}
@@ -267,181 +255,3 @@ def archive(study_dir=".", configfiles=(), out=None, echo=print) -> Path:
         for line in package_differences(parse_lock(repo_lock.read_text()), manifest["packages"]):
             echo(f"warning: this environment differs from requirements.lock: {line.replace('archived', 'locked')}")
     return path
-
-
-def check_checksums(members: dict[str, bytes]) -> list[str]:
-    """One problem per member that is changed, missing or unlisted against ``SHA256SUMS``."""
-    if CHECKSUMS not in members:
-        return [f"{CHECKSUMS}: missing from the archive"]
-    listed, problems = {}, []
-    for line in members[CHECKSUMS].decode(errors="replace").splitlines():
-        digest, _, name = line.partition("  ")
-        if name:
-            listed[name] = digest
-        elif line.strip():
-            problems.append(f"{CHECKSUMS}: unreadable line '{line}'")
-    for name, digest in listed.items():
-        if name not in members:
-            problems.append(f"{name}: missing from the archive (listed in {CHECKSUMS})")
-        elif hashlib.sha256(members[name]).hexdigest() != digest:
-            problems.append(f"{name}: checksum differs from {CHECKSUMS} (changed after archiving)")
-    problems += [f"{name}: not in {CHECKSUMS} (added after archiving)"
-                 for name in members if name not in listed and name != CHECKSUMS]
-    return problems + [f"{name}: missing from the archive" for name in REQUIRED if name not in members]
-
-
-def cheapest_case(members: dict[str, bytes], study: dict, cases: dict) -> tuple[str, float | None]:
-    """The archived case whose jobs took least time when archived (from their benchmarks),
-    with that time in s; when no case has all its benchmarks, the case with fewest time
-    steps and least AO/LGS/WFS/camera work (time ``None``)."""
-    archived = [c for c in cases if f"results/cases/{c}/lucky.nc" in members]
-    if not archived:
-        raise ArchiveError("the archive holds no case's lucky.nc")
-    times = {}
-    for case in archived:
-        tables = [members.get(f"results/benchmarks/{job}.tsv") for job in case_jobs(study, cases, case)]
-        if all(tables):
-            times[case] = sum(float(t.decode().splitlines()[1].split("\t")[0]) for t in tables)
-    if times:
-        case = min(times, key=lambda c: (times[c], c))
-        return case, times[case]
-
-    def work(c):
-        config = cases[c]
-        return (frame_count(config) * round(config["camera"]["frame_time_s"] / config["time_step_s"]),
-                len(config["targets_arcsec"]), config["lgs"]["enabled"], config["ao"]["mode"] != "none",
-                config["wfs"]["n_subapertures"], config["camera"]["n_pixels"], c)
-    return min(archived, key=work), None
-
-
-def compare_variables(fresh: xr.Dataset, archived: xr.Dataset, rtol: float, atol: float) -> list[tuple[str, bool, str]]:
-    """(variable, agrees, how) for every variable and coordinate of two datasets, and the
-    ``config_sha256`` and ``seed`` attributes: identical, within ``atol + rtol |archived|``
-    (with the largest absolute and relative differences), or different; a variable of
-    the rerun only (newer code) agrees, one missing from the rerun does not."""
-    rows = [(f"attribute {key}", fresh.attrs.get(key) == archived.attrs.get(key),
-             "identical" if fresh.attrs.get(key) == archived.attrs.get(key) else
-             f"{fresh.attrs.get(key)} in the rerun, {archived.attrs.get(key)} archived")
-            for key in ("config_sha256", "seed")]
-    for name in sorted(set(fresh.variables) | set(archived.variables), key=str):
-        if name not in archived.variables:  # newer code adds it: every archived number is still compared
-            rows.append((name, True, "new in the rerun, not archived (not compared)"))
-            continue
-        if name not in fresh.variables:
-            rows.append((name, False, "missing in the rerun: DIFFERS"))
-            continue
-        a, b = fresh[name].values, archived[name].values
-        numeric = a.dtype.kind in "fciu" and b.dtype.kind in "fciu"
-        if a.shape != b.shape:
-            rows.append((name, False, f"shape {a.shape} in the rerun, {b.shape} archived"))
-        elif np.array_equal(a, b, equal_nan=numeric and (a.dtype.kind in "fc" or b.dtype.kind in "fc")):
-            rows.append((name, True, "identical"))
-        elif not numeric:
-            rows.append((name, False, "DIFFERS"))
-        else:
-            a, b = a.astype(np.result_type(a, b, np.float64)), b.astype(np.result_type(a, b, np.float64))
-            with np.errstate(invalid="ignore", divide="ignore"):
-                diff = np.where((a == b) | (np.isnan(a) & np.isnan(b)), 0.0, np.abs(a - b))
-                diff = np.where(np.isnan(diff), np.inf, diff)
-                relative = np.where(diff > 0, diff / np.abs(b), 0.0)
-            agrees = bool(np.all(diff <= atol + rtol * np.abs(b)))
-            rows.append((name, agrees, f"max abs diff {diff.max():.3g}, max rel diff {np.nanmax(relative):.3g}: "
-                                       + (f"within rtol={rtol:g}, atol={atol:g}" if agrees else "DIFFERS")))
-    return rows
-
-
-def verify(path, case=None, workdir=None, rtol=0.0, atol=0.0, cores=2, snakefile=None, rerun=True,
-           echo=print) -> bool:
-    """Check the archive ``path`` and rerun one of its cases; True when everything agrees.
-
-    Checksums first (a damaged archive is not rerun). Then warnings when this
-    environment's runtime packages, Python or code version differ from the archived
-    ones. Then ``case`` (default: ``cheapest_case``) is rerun by Snakemake on
-    ``snakefile`` (this checkout's) with the archived config, in ``workdir`` (kept;
-    a finished rerun there is reused) or a scratch folder (removed when it agrees), and
-    each variable of its files compared with the archive: equal within
-    ``atol + rtol |archived|``; the default 0, 0 asks for bit-identical numbers.
-    """
-    members = read_members(path)
-    problems = check_checksums(members)
-    for problem in problems:
-        echo(f"FAILED: {problem}")
-    if problems:
-        echo(f"verify: FAILED, archive '{path}' is damaged: {len(problems)} members; not rerun")
-        return False
-    echo(f"checksums: all {len(members) - 1} members agree with {CHECKSUMS}")
-    manifest = json.loads(members["MANIFEST.json"])
-    if manifest.get("format") != FORMAT:
-        raise ArchiveError(f"archive '{path}' has format {manifest.get('format')}, this code reads {FORMAT}")
-    here = runtime_packages()
-    differences = package_differences(parse_lock(members["requirements.lock"].decode()), here)
-    if manifest["python"] != platform.python_version():
-        differences.insert(0, f"Python {manifest['python']} archived, {platform.python_version()} here")
-    for line in differences:
-        echo(f"warning: environment differs: {line}")
-    if not differences:
-        echo(f"environment: the archived versions of all {len(here)} runtime packages and Python")
-    if manifest["code_version"] != code_version():
-        echo(f"warning: archived by code {manifest['code_version']}; this code is {code_version()} "
-             f"(to rerun the archived code: git checkout {manifest['git_commit']}"
-             f"{', then git apply code.diff' if manifest['git_dirty'] else ''})")
-    if not rerun:
-        return True
-
-    study = yaml.safe_load(members["config.yaml"])
-    cases = validate_study(study)
-    if case is None:
-        case, seconds = cheapest_case(members, study, cases)
-    else:
-        seconds = None
-        if f"results/cases/{case}/lucky.nc" not in members:
-            raise ArchiveError(f"case '{case}' is not in the archive; archived: {', '.join(manifest['cases'])}")
-    snakefile = Path(snakefile) if snakefile else REPO / "Snakefile"
-    if not snakefile.is_file():
-        raise ArchiveError(f"no Snakefile at '{snakefile}': give the checkout's with --snakefile")
-    scratch = workdir is None
-    workdir = Path(tempfile.mkdtemp(prefix="luckyao-verify-") if scratch else workdir)
-    (workdir / "config").mkdir(parents=True, exist_ok=True)
-    (workdir / "config" / "config.yaml").write_bytes(members["config.yaml"])
-    target = f"results/cases/{case}/lucky.nc"
-    command = [sys.executable, "-m", "snakemake", "-s", str(snakefile), "-d", str(workdir), "--cores", str(cores),
-               target]
-    echo(f"rerun: case '{case}'" + (f" (its jobs took {seconds:.0f} s when archived)" if seconds else "")
-         + f" in {workdir}")
-    start = time.perf_counter()
-    log = workdir / "verify-snakemake.log"
-    with open(log, "w") as stream:
-        result = subprocess.run(command, stdout=stream, stderr=subprocess.STDOUT)
-    if result.returncode:
-        tail = log.read_text().splitlines()[-15:]
-        echo("\n".join(tail))
-        echo(f"verify: FAILED, the rerun of case '{case}' failed (Snakemake exit {result.returncode}, log {log})")
-        return False
-    echo(f"rerun took {time.perf_counter() - start:.0f} s")
-
-    failures = []
-    for name in CASE_FILES:
-        member = f"results/cases/{case}/{name}"
-        if member not in members:
-            continue
-        archived_path = workdir / "archived" / name
-        archived_path.parent.mkdir(exist_ok=True)
-        archived_path.write_bytes(members[member])
-        with xr.open_dataset(workdir / member) as fresh, xr.open_dataset(archived_path) as archived:
-            fresh_version = fresh.attrs.get("code_version")
-            if fresh_version != archived.attrs.get("code_version"):
-                echo(f"{member}: made by code {archived.attrs.get('code_version')}, rerun by {fresh_version}")
-            for variable, agrees, how in compare_variables(fresh.load(), archived.load(), rtol, atol):
-                echo(f"{member}: {variable}: {how}")
-                if not agrees:
-                    failures.append(f"{member}: {variable}: {how}")
-    for failure in failures:
-        echo(f"FAILED: {failure}")
-    if failures:
-        echo(f"verify: FAILED, the rerun of case '{case}' differs from the archive in {len(failures)} variables "
-             f"(rerun kept in {workdir})")
-        return False
-    if scratch:
-        shutil.rmtree(workdir, ignore_errors=True)
-    echo(f"verify: OK, checksums and the rerun of case '{case}' agree with archive '{path}'")
-    return True

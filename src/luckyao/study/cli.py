@@ -10,7 +10,7 @@
     luckyao figure --id ID --settings JSON --out-prefix figures/ID  lucky.nc ...
     luckyao table figures/longexp.nc
     luckyao archive [--study-dir DIR] [--configfile OVERLAY ...] [--out A.tar]
-    luckyao verify A.tar [--case NAME] [--workdir DIR] [--rtol R] [--atol A] [--no-rerun]
+    luckyao verify A.tar [--case NAME | --all-cases] [--workdir DIR] [--rtol R] [--atol A] [--no-rerun]
     luckyao lock [--out requirements.lock]
 """
 
@@ -137,11 +137,11 @@ def cmd_archive(args) -> int:
 
 def cmd_verify(args) -> int:
     """0 when the archive's checksums and the rerun case agree, else 1 naming what differs."""
-    from .archive import verify
+    from .verify import verify
 
     try:
         agrees = verify(args.archive, args.case, args.workdir, args.rtol, args.atol, args.cores, args.snakefile,
-                        rerun=not args.no_rerun)
+                        rerun=not args.no_rerun, all_cases=args.all_cases)
     except ValueError as err:
         print(f"luckyao verify: FAILED: {err}", file=sys.stderr)
         return 1
@@ -226,6 +226,7 @@ def main(argv=None) -> int:
     p = sub.add_parser("verify", help="check an archive's checksums, rerun one case and compare its numbers")
     p.add_argument("archive")
     p.add_argument("--case", help="case to rerun (default: the one whose jobs took least time)")
+    p.add_argument("--all-cases", action="store_true", help="rerun every archived case (the whole study's time)")
     p.add_argument("--workdir", help="folder of the rerun, kept (default: a scratch folder)")
     p.add_argument("--rtol", type=float, default=0.0, help="relative tolerance (default 0: bit-identical)")
     p.add_argument("--atol", type=float, default=0.0, help="absolute tolerance (default 0)")

@@ -14,25 +14,10 @@ from concurrent.futures import ThreadPoolExecutor
 import numpy as np
 import xarray as xr
 
-from ..atmosphere.screens import ScreenSet, StripSpec, strip_screen, strip_spec
-from ..atmosphere.statistics import Layer
-from ..units import ARCSEC_RAD
+from ..atmosphere.screens import ScreenSet, StripSpec, strip_screen, strip_specs
 from .datasets import atomic_path, open_dataset, require_finite, write_dataset
 
 log = logging.getLogger(__name__)
-
-
-def strip_specs(spec: dict) -> list[StripSpec]:
-    """Each layer's strip geometry for a turbulence spec."""
-    n_steps = int(np.ceil(spec["duration_s"] / spec["time_step_s"] - 1e-9)) + 1
-    specs = []
-    for height, speed, direction in zip(spec["height_m"], spec["wind_speed_m_s"], spec["wind_direction_deg"]):
-        layer = Layer(height, 1.0, speed, direction)
-        # square pupil grids reach sqrt(2) D / 2 in their corners
-        radius = 0.75 * spec["diameter_m"] + spec["field_radius_arcsec"] * ARCSEC_RAD * height
-        specs.append(strip_spec(layer, spec["time_step_s"], n_steps, spec["max_pixel_m"], radius,
-                                spec["min_along_m"], spec["min_across_m"]))
-    return specs
 
 
 def write_screens(spec: dict, screens_path, metadata_path, attrs: dict, threads: int = 1) -> None:
