@@ -6,6 +6,7 @@ import gzip
 import hashlib
 import io
 import json
+import shutil
 import subprocess
 import sys
 import tarfile
@@ -205,20 +206,23 @@ def test_verify_names_a_changed_case_it_does_not_rerun_only_with_all_cases(archi
     assert code == 0, output
     code, output = verify(capsys, path, "--all-cases", "--workdir", workdir)
     assert code == 1, output
-    assert f"FAILED: {member}: strehl: max abs diff" in output and "results/cases/good/lucky.nc: strehl: identical" in output
+    assert f"FAILED: {member}: strehl: max abs diff" in output
+    assert "results/cases/good/lucky.nc: strehl: identical" in output
 
 
-def test_a_corrupt_member_of_the_rerun_case_is_named_and_its_scratch_folder_removed(archive, tmp_path, capsys,
-                                                                                   monkeypatch):
+def test_a_corrupt_member_of_the_rerun_case_is_named_and_its_scratch_folder_removed(archive, verified, tmp_path,
+                                                                                   capsys, monkeypatch):
+    """The scratch folder is given a copy of the finished rerun (Snakemake reruns nothing)."""
+    _, _, rerun = verified
     member = "results/cases/good/telemetry.nc"
     path = rewritten(archive, tmp_path / "f.tar", {member: b"not a netCDF file"}, True)
-    scratch = tmp_path / "scratch"
-    scratch.mkdir()
-    monkeypatch.setattr(tempfile, "tempdir", str(scratch))
+    scratch = tmp_path / "luckyao-verify-scratch"
+    shutil.copytree(rerun, scratch, symlinks=True)
+    monkeypatch.setattr(tempfile, "mkdtemp", lambda prefix: str(scratch))
     code, output = verify(capsys, path, "--case", "good")
     assert code == 1, output
     assert f"FAILED: {member}: unreadable" in output and "Traceback" not in output
-    assert list(scratch.iterdir()) == []
+    assert not scratch.exists()
 
 
 class Zeros(io.RawIOBase):

@@ -63,6 +63,15 @@ def study_copy(tmp_path_factory):
     return copy, workdir
 
 
+def test_a_copied_checkout_with_its_finished_study_is_up_to_date(study_copy, tmp_path):
+    """The checkout copied with its study (times kept, as ``cp -a`` does): its code inputs
+    are named relative to the study folder, so the copy's dry run plans nothing."""
+    copy, _ = study_copy
+    moved = tmp_path / "moved"
+    shutil.copytree(copy, moved, symlinks=True)
+    assert _rules_planned(_snakemake(moved, moved / "run", "--dry-run")) == set()
+
+
 @pytest.mark.parametrize("module", sorted(EXPECTED))
 def test_a_code_edit_reruns_exactly_the_steps_that_depend_on_it(study_copy, module):
     copy, workdir = study_copy

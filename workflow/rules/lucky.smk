@@ -9,7 +9,8 @@ rule lucky:
         "results/cases/{case}/lucky.nc",
     params:
         settings=lambda w: canonical_json(lucky_settings(STUDY, CASES, w.case)),
-        replay=lambda w, input: ["--screens", input.replay[0], "--screens-metadata", input.replay[1]] if input.replay else [],
+        replay=lambda w, input: (["--screens", input.replay[0], "--screens-metadata", input.replay[1]]
+                                 if input.replay else []),
     threads: 1
     priority: 10  # a finished simulation's frame cube is post-processed (and, if temporary, deleted) first
     resources:

@@ -9,7 +9,8 @@ rule reconstructor:
     threads: 1
     priority: 10  # seconds each, before the screens: every AO simulation waits for them
     resources:
-        mem_mb=lambda w: mem_mb(reconstructor_memory_bytes(RECONSTRUCTOR_BY_KEY[w.rkey]), 1500),  # at most 1.1 GB measured
+        # at most 1.1 GB measured
+        mem_mb=lambda w: mem_mb(reconstructor_memory_bytes(RECONSTRUCTOR_BY_KEY[w.rkey]), 1500),
         runtime=5,  # minutes; at most 1 measured
     log:
         "logs/reconstructor/{rkey}.log",
@@ -30,7 +31,8 @@ rule commands:
     threads: 1
     priority: 10  # seconds each, before the screens: every AO simulation waits for them
     resources:
-        mem_mb=lambda w: mem_mb(commands_memory_bytes(COMMANDS_BY_KEY[w.ckey]), 1500),  # at most 1.1 GB measured (32x32 WFS)
+        # at most 1.1 GB measured (32x32 WFS)
+        mem_mb=lambda w: mem_mb(commands_memory_bytes(COMMANDS_BY_KEY[w.ckey]), 1500),
         runtime=5,  # minutes; at most 1 measured
     log:
         "logs/commands/{ckey}.log",

@@ -17,7 +17,8 @@ rule simulate:
     threads: 1
     priority: lambda w: simulate_priority(w.case)
     resources:
-        mem_mb=lambda w: mem_mb(simulate_memory_bytes(CASES[w.case]), 4000),  # paper fidelity: 2-3 GB measured (screens memory-mapped)
+        # paper fidelity: 2-3 GB measured (the screens are memory-mapped)
+        mem_mb=lambda w: mem_mb(simulate_memory_bytes(CASES[w.case]), 4000),
         runtime=60,  # minutes; paper fidelity: 4-10 per target, up to 30 for a 7-target field case
     log:
         "logs/simulate/{case}.log",

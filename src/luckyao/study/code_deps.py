@@ -8,9 +8,15 @@ every package on the way), computed from the source when the workflow is
 parsed, so the list cannot drift from the code. The generated WFS kernels are
 made from ``wfs/kernels.py`` and ``wfs/codelets.py``, which are in the closure
 of every step that runs them.
+
+The files are named relative to the study folder when it lies in the checkout
+(``bash run.sh study``: the checkout itself), so a checkout moved or copied with
+its finished study stays up to date; absolute otherwise (a study folder
+elsewhere may move alone).
 """
 
 import ast
+import os
 from pathlib import Path
 
 PACKAGE_ROOT = Path(__file__).resolve().parents[1]
@@ -65,9 +71,15 @@ def import_closure(module: str, root: Path = PACKAGE_ROOT) -> list[Path]:
     return sorted(files)
 
 
-def step_sources(step: str, root: Path = PACKAGE_ROOT) -> list[str]:
+def step_sources(step: str, root: Path = PACKAGE_ROOT, workdir=None) -> list[str]:
     """Files a workflow step's results depend on: the import closure of
     ``luckyao.study.<step>`` plus the command line that dispatches to it
-    (``python -m luckyao``; its per-step imports are lazy, so only its own files)."""
+    (``python -m luckyao``; its per-step imports are lazy, so only its own files);
+    relative to ``workdir`` (default: here, the study folder) when it lies in the
+    checkout (``root``'s ``src/..``)."""
     entry = [module_file(m, root) for m in ("luckyao.__main__", "luckyao.study.cli")]
-    return sorted(str(p) for p in set(import_closure(f"luckyao.study.{step}", root)) | set(entry))
+    files = sorted(set(import_closure(f"luckyao.study.{step}", root)) | set(entry))
+    workdir = Path(workdir or os.getcwd()).resolve()
+    if workdir.is_relative_to(root.resolve().parents[1]):
+        return [os.path.relpath(p, workdir) for p in files]
+    return [str(p) for p in files]

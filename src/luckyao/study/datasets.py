@@ -1,14 +1,20 @@
 """netCDF files of the study: provenance, atomic writes, checked reads.
 
 Every file is written under a temporary name and renamed when complete, so a
-file with the final name is never half-written. Conventions: CF-1.8 style,
-``units`` and ``long_name`` on every variable; provenance in global attributes.
+file with the final name is never half-written; a failed write names the file
+and what limits it (free disk, file size limit). A study file read by a job
+that is unreadable or holds NaN where it may not is set aside as
+``<name>.bad`` (``set_aside``), with an error naming it: the next run remakes
+it with the job that made it. Conventions: CF-1.8 style, ``units`` and
+``long_name`` on every variable; provenance in global attributes.
 """
 
 import datetime
 import json
 import os
 import platform
+import resource
+import shutil
 import subprocess
 from contextlib import contextmanager
 from functools import cache
@@ -72,6 +78,29 @@ def require_finite(values, what: str, variable: str, index_names=()) -> None:
         raise ValueError(f"{what}: variable '{variable}' is not finite at {where}")
 
 
+def set_aside(path, problem: str) -> str:
+    """Rename the bad study file ``path`` to ``<name>.bad`` (replacing an older one), so
+    that the next run remakes it; returns ``problem`` saying so."""
+    path = Path(path)
+    bad = path.with_name(path.name + ".bad")
+    try:
+        os.replace(path, bad)
+    except OSError as err:
+        return f"{problem}; delete it and rerun (it could not be set aside: {err})"
+    return f"{problem}; set aside as '{bad}': the next run remakes it"
+
+
+def write_failure(path, partial: Path, err: Exception) -> OSError:
+    """The error of a failed write, naming the file, how far it got and what limits it."""
+    path = Path(path)
+    written = partial.stat().st_size if partial.exists() else 0
+    limits = [f"{shutil.disk_usage(path.parent).free / 1e9:,.1f} GB free on its disk"]
+    file_limit = resource.getrlimit(resource.RLIMIT_FSIZE)[0]
+    if file_limit != resource.RLIM_INFINITY:
+        limits.append(f"file size limit (ulimit -f) {file_limit:,} bytes")
+    return OSError(f"writing '{path}' failed after {written:,} bytes: {err} ({'; '.join(limits)})")
+
+
 @contextmanager
 def atomic_path(path):
     """Yields a temporary path next to ``path``; renamed to ``path`` on success only."""
@@ -98,19 +127,32 @@ def write_dataset(ds: xr.Dataset, path, compress: bool = True, allow_nan=()) -> 
             if var.dtype.kind == "f" and var.size > 1:
                 encoding[name] = {"zlib": True, "complevel": 4, "shuffle": True}
     with atomic_path(path) as tmp:
-        ds.to_netcdf(tmp, engine="netcdf4", encoding=encoding)
+        try:
+            ds.to_netcdf(tmp, engine="netcdf4", encoding=encoding)
+        except (OSError, RuntimeError) as err:
+            raise write_failure(path, tmp, err) from err
 
 
-def open_dataset(path, what: str) -> xr.Dataset:
-    """Open a study file fully into memory with a clear error if missing or corrupt."""
+def open_dataset(path, what: str, allow_nan=None, remake: bool = True) -> xr.Dataset:
+    """Open a study file fully into memory with a clear error if missing or corrupt. With
+    ``allow_nan`` (a set), every float variable but those must be finite. A corrupt or
+    non-finite file is set aside for the next run to remake (``remake``)."""
     path = Path(path)
     if not path.exists():
         raise FileNotFoundError(f"{what} file '{path}' is missing; rerun the step that makes it")
     try:
         with xr.open_dataset(path, engine="netcdf4") as ds:
-            return ds.load()
+            ds = ds.load()
     except (OSError, ValueError, RuntimeError) as err:
-        raise OSError(f"{what} file '{path}' is unreadable or corrupt ({err}); delete it and rerun") from err
+        problem = f"{what} file '{path}' is unreadable or corrupt ({err})"
+        raise OSError(set_aside(path, problem) if remake else problem) from err
+    for name, var in ds.data_vars.items() if allow_nan is not None else ():
+        if var.dtype.kind == "f" and name not in allow_nan:
+            try:
+                require_finite(var.values, f"{what} file '{path}'", name, var.dims)
+            except ValueError as err:
+                raise ValueError(set_aside(path, str(err)) if remake else str(err)) from None
+    return ds
 
 
 class FrameWriter:
@@ -132,7 +174,7 @@ class FrameWriter:
         self._attrs = attrs
 
     def __enter__(self):
-        tmp = self._atomic.__enter__()
+        tmp = self._partial = self._atomic.__enter__()
         n_targets, n_frames, n = self._shape
         self._nc = netCDF4.Dataset(tmp, "w", format="NETCDF4")
         self._nc.setncatts(self._attrs)
@@ -158,10 +200,18 @@ class FrameWriter:
             require_finite(block, f"frames file '{self._atomic_target}'", "frames", ("target", "frame", "y", "x"))
         except ValueError as err:
             raise ValueError(f"{err} (block from frame {start})") from None
-        self.frames[:, start:start + block.shape[1]] = block
+        try:
+            self.frames[:, start:start + block.shape[1]] = block
+        except (OSError, RuntimeError) as err:
+            raise write_failure(self._atomic_target, self._partial, err) from err
 
     def __exit__(self, exc_type, exc, tb):
-        self._nc.close()
+        try:
+            self._nc.close()
+        except (OSError, RuntimeError) as err:
+            failure = write_failure(self._atomic_target, self._partial, err)
+            self._atomic.__exit__(type(failure), failure, None)
+            raise failure from err
         return self._atomic.__exit__(exc_type, exc, tb)
 
 
@@ -176,7 +226,7 @@ def iter_frame_blocks(path, target: int, block: int = 64):
         try:
             nc = netCDF4.Dataset(path, "r")
         except OSError as err:
-            raise OSError(f"frames file '{path}' is unreadable or corrupt ({err})") from err
+            raise OSError(set_aside(path, f"frames file '{path}' is unreadable or corrupt ({err})")) from err
         with nc:
             frames = nc.variables["frames"]
             stored = [int(t) for t in nc.variables["target"][:]]
@@ -184,6 +234,15 @@ def iter_frame_blocks(path, target: int, block: int = 64):
                 raise ValueError(f"frames file '{path}' holds targets {stored}, not target {target}")
             row = stored.index(target)
             for start in range(0, frames.shape[1], block):
-                yield start, np.asarray(frames[row, start:start + block], dtype=np.float32)
+                try:
+                    frames_block = np.asarray(frames[row, start:start + block], dtype=np.float32)
+                except (OSError, RuntimeError, IndexError) as err:
+                    raise OSError(set_aside(path, f"frames file '{path}' is unreadable from frame {start} ({err})")) \
+                        from err
+                try:
+                    require_finite(frames_block, f"frames file '{path}'", "frames", ("frame", "y", "x"))
+                except ValueError as err:
+                    raise ValueError(set_aside(path, f"{err} (block from frame {start}, target {target})")) from None
+                yield start, frames_block
 
     return iterate

@@ -63,7 +63,7 @@ def lucky_case(settings: dict, frames_path, telemetry_path, out_path, screens_pa
     """Write one case's ``lucky.nc``; ``settings`` from ``config.lucky_settings``. The
     targets the simulation did not image (:func:`.config.imaged_targets`) are replayed
     from the screens with the recorded DM commands (:func:`.simulation.replay_frames`)."""
-    telemetry = open_dataset(telemetry_path, "telemetry")
+    telemetry = open_dataset(telemetry_path, "telemetry", allow_nan={"axis_strehl"})  # NaN: a target not imaged
     case = settings["case_config"]
     imaged = imaged_targets(case)
     detectors = [Detector(name, d["photons_per_frame"], d["read_noise_e"])

@@ -15,7 +15,7 @@ import numpy as np
 import xarray as xr
 
 from ..atmosphere.screens import ScreenSet, StripSpec, strip_screen, strip_specs
-from .datasets import atomic_path, open_dataset, require_finite, write_dataset
+from .datasets import atomic_path, open_dataset, require_finite, set_aside, write_dataset
 
 log = logging.getLogger(__name__)
 
@@ -73,7 +73,7 @@ def write_screens(spec: dict, screens_path, metadata_path, attrs: dict, threads:
 
 def read_screens(screens_path, metadata_path) -> ScreenSet:
     """The screens, memory-mapped read-only, with their geometry."""
-    meta = open_dataset(metadata_path, "turbulence metadata")
+    meta = open_dataset(metadata_path, "turbulence metadata", allow_nan=())
     specs = tuple(
         StripSpec(dx_m=float(meta.dx_m[i]), n_major=int(meta.n_major[i]), n_minor=int(meta.n_minor[i]),
                   major_axis=int(meta.major_axis[i]), skew=int(meta.skew[i]),
@@ -82,15 +82,17 @@ def read_screens(screens_path, metadata_path) -> ScreenSet:
         for i in range(meta.sizes["layer"]))
     try:
         flat = np.load(screens_path, mmap_mode="r")
+    except FileNotFoundError as err:
+        raise OSError(f"turbulence file '{screens_path}' is missing ({err}); rerun its rule") from err
     except (OSError, ValueError) as err:
-        raise OSError(f"turbulence file '{screens_path}' is missing or corrupt ({err}); rerun its rule") from err
+        raise OSError(set_aside(screens_path, f"turbulence file '{screens_path}' is corrupt ({err})")) from err
     expected = int(meta.start[-1]) + specs[-1].n_major * specs[-1].n_minor
     if flat.dtype != np.float32 or flat.shape != (expected,):
-        raise OSError(f"turbulence file '{screens_path}' holds {flat.shape} {flat.dtype}, "
-                      f"its metadata expects ({expected},) float32; rerun its rule")
+        raise OSError(set_aside(screens_path, f"turbulence file '{screens_path}' holds {flat.shape} {flat.dtype}, "
+                                              f"its metadata expects ({expected},) float32"))
     for begin in range(0, flat.size, 1 << 24):  # memory-mapped: check in 64 MB chunks
         try:
             require_finite(flat[begin:begin + (1 << 24)], f"turbulence file '{screens_path}'", "screens")
         except ValueError as err:
-            raise ValueError(f"{err} (offset from {begin}); rerun its rule") from None
+            raise ValueError(set_aside(screens_path, f"{err} (offset from {begin})")) from None
     return ScreenSet(specs, flat, meta.start.values.astype(np.int64))
