@@ -12,6 +12,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import netCDF4
+import numpy as np
 import pytest
 import yaml
 
@@ -70,6 +72,27 @@ def test_a_copied_checkout_with_its_finished_study_is_up_to_date(study_copy, tmp
     moved = tmp_path / "moved"
     shutil.copytree(copy, moved, symlinks=True)
     assert _rules_planned(_snakemake(moved, moved / "run", "--dry-run")) == set()
+
+
+def test_a_job_that_finds_nan_in_its_input_names_it_and_the_next_run_remakes_it(study_copy, tmp_path):
+    """NaN written into a finished case's telemetry: its post-processing (forced) fails naming
+    the telemetry file, not its own output, and the next run of it remakes the telemetry with
+    the simulation that made it (the file set aside as ``telemetry.nc.bad``)."""
+    copy, _ = study_copy
+    moved = tmp_path / "copy"
+    shutil.copytree(copy, moved, symlinks=True)
+    telemetry = moved / "run" / "results" / "cases" / "good" / "telemetry.nc"
+    with netCDF4.Dataset(telemetry, "r+") as nc:
+        name, variable = next((name, v) for name, v in nc.variables.items()
+                              if v.dtype.kind == "f" and "frame" in v.dimensions and name != "axis_strehl")
+        variable[(0,) * variable.ndim] = np.nan
+    failed = _snakemake(moved, moved / "run", "--forcerun", "lucky")
+    assert failed.returncode != 0
+    log = (moved / "run" / "logs" / "lucky" / "good.log").read_text()
+    assert f"telemetry file 'results/cases/good/telemetry.nc': variable '{name}' is not finite" in log, log
+    assert telemetry.with_name("telemetry.nc.bad").exists()
+    remake = _snakemake(moved, moved / "run", "--dry-run", "results/cases/good/lucky.nc")
+    assert _rules_planned(remake) == {"simulate", "lucky"}
 
 
 @pytest.mark.parametrize("module", sorted(EXPECTED))
