@@ -3,7 +3,8 @@ import re
 import sys
 
 from luckyao.study.code_deps import step_sources
-from luckyao.study.config import (ConfigError, canonical_json, commands_key, commands_spec, imaged_targets,
+from luckyao.study.config import (ConfigError, calibration_key, calibration_spec, canonical_json, commands_key,
+                                  commands_spec, imaged_targets,
                                   lucky_settings, reconstructor_key, reconstructor_spec, sweep_detectors,
                                   turbulence_key, turbulence_spec, validate_study)
 
@@ -19,6 +20,8 @@ RECONSTRUCTOR = {name: reconstructor_spec(case) for name, case in CASES.items()}
 RECONSTRUCTOR_BY_KEY = {reconstructor_key(s): s for s in RECONSTRUCTOR.values() if s is not None}
 COMMANDS = {name: commands_spec(case) for name, case in CASES.items()}
 COMMANDS_BY_KEY = {commands_key(s): s for s in COMMANDS.values() if s is not None}
+CALIBRATION = {name: calibration_spec(STUDY, case) for name, case in CASES.items()}
+CALIBRATION_BY_KEY = {calibration_key(s): s for s in CALIBRATION.values() if s is not None}
 LUCKYAO = f"OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1 NUMBA_NUM_THREADS=1 {sys.executable} -m luckyao"
 
 
@@ -34,6 +37,12 @@ def commands_file(case):
     return f"results/commands/{commands_key(spec)}.nc" if spec else []
 
 
+def calibration_file(case):
+    """The case's cached WFS calibration file, or [] without one."""
+    spec = CALIBRATION[case]
+    return f"results/calibrations/{calibration_key(spec)}.nc" if spec else []
+
+
 def frames_output(path):
     return path if STUDY.get("keep_frames", False) else temp(path)
 
@@ -43,6 +52,7 @@ wildcard_constraints:
     key="screens_[0-9a-f]{12}",
     rkey="reconstructor_[0-9a-f]{12}",
     ckey="commands_[0-9a-f]{12}",
+    wkey="calibration_[0-9a-f]{12}",
     fig="|".join(re.escape(f) for f in STUDY["figures"]),
 
 

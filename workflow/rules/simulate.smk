@@ -5,6 +5,7 @@ rule simulate:
         screens_metadata=lambda w: f"results/turbulence/{turbulence_key(TURBULENCE[w.case])}.nc",
         reconstructor=lambda w: reconstructor_file(w.case),
         commands=lambda w: commands_file(w.case),
+        calibration=lambda w: calibration_file(w.case),
         code=step_sources("simulation"),
     output:
         frames=frames_output("results/cases/{case}/frames.nc"),
@@ -24,5 +25,5 @@ rule simulate:
     shell:
         "{LUCKYAO} simulate --case {params.case:q} --name {wildcards.case:q} --seed {params.seed}"
         " --screens {input.screens} --screens-metadata {input.screens_metadata}"
-        " --reconstructor '{input.reconstructor}' --commands '{input.commands}'"
+        " --reconstructor '{input.reconstructor}' --commands '{input.commands}' --calibration '{input.calibration}'"
         " --frames {output.frames} --telemetry {output.telemetry} 2> {log}"
