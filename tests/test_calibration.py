@@ -1,17 +1,26 @@
 """The calibrated WFS response and the centroiders, against geometric slopes and known shifts."""
 
+import hashlib
 from functools import cache
+from pathlib import Path
 
 import numpy as np
 import pytest
+import yaml
 
+from luckyao.atmosphere.screens import ScreenSet, periodic_screen_amplitude, periodic_screen_pair, strip_screen
 from luckyao.optics.pupil import Telescope
+from luckyao.study import calibration as calibration_product
+from luckyao.study.case import Case
+from luckyao.study.config import calibration_spec, commands_spec, deep_merge, reconstructor_spec, turbulence_spec
+from luckyao.study.reconstructor import build_commands, build_reconstructors
+from luckyao.study.simulation import lgs_chain, simulate
+from luckyao.study.turbulence import strip_specs
 from luckyao.units import ARCSEC_RAD, REFERENCE_WAVELENGTH_M
 from luckyao.wfs import shack_hartmann as sh
 from luckyao.wfs.beacons import LgsConfig
 from luckyao.wfs.calibration import BeaconSeeing, measure_response, reference_spot_spectra
 from luckyao.wfs.centroiders import CentreOfGravity, Correlation, ThresholdedCentreOfGravity
-from luckyao.atmosphere.screens import periodic_screen_amplitude, periodic_screen_pair
 
 TELESCOPE = Telescope(4.2, 1.2)
 HEIGHTS_M = (47, 140, 281, 562, 1125, 2250, 4500, 9000, 18000)  # the study's profile
@@ -139,3 +148,56 @@ def test_thresholded_centre_of_gravity_ignores_a_background():
     assert np.all(CentreOfGravity(wfs).positions(background)[0, 0] < 0.45 * pixel)
     np.testing.assert_array_equal(ThresholdedCentreOfGravity(wfs, 0.0).positions(background),
                                   CentreOfGravity(wfs).positions(background))
+
+
+TINY = Path(__file__).parent / "data" / "tiny.yaml"
+OLD_TELEMETRY_SHA256 = "1f8ee4287be2f42dfac85b2dd700818f3b92c2879c39e14f05ec27c3376b0516"
+"""Every variable of the tiny LTAO case's telemetry (0.1 s, seed 7) as the code before the
+centroiders and the calibration (d889eb8) wrote it, on this machine."""
+
+
+@pytest.fixture(scope="module")
+def tiny_ltao():
+    study = yaml.safe_load(TINY.read_text())
+    config = deep_merge(study["base"], {"lgs": {"enabled": True}, "ao": {"mode": "ltao"}, "duration_s": 0.1})
+    specs = strip_specs(turbulence_spec(study, config))
+    screens = ScreenSet.from_screens(specs, [strip_screen(s, 20.0, np.random.default_rng([7, i]))
+                                             for i, s in enumerate(specs)])
+    reconstructors = build_reconstructors(reconstructor_spec(config))["reconstructor"].values
+    commands = build_commands(commands_spec(config))
+    commands = commands["command_matrix"].values, commands["dm_slopes"].values
+
+    def run(product=None, **wfs):
+        case_config = deep_merge(config, {"wfs": wfs})
+        case = Case.from_config(case_config)
+        sensor, estimator = lgs_chain(case, screens, reconstructors, 7, product)
+        return case_config, simulate(case, screens, lambda start, block: None, sensor, estimator, commands)
+
+    return study, run
+
+
+def test_uncalibrated_centre_of_gravity_reproduces_the_old_telemetry(tiny_ltao):
+    _, run = tiny_ltao
+    _, telemetry = run()
+    digest = hashlib.sha256()
+    for name in sorted(telemetry.data_vars):
+        digest.update(name.encode())
+        digest.update(np.ascontiguousarray(telemetry[name].values).tobytes())
+    assert digest.hexdigest() == OLD_TELEMETRY_SHA256
+
+
+def test_calibrated_open_loop_rms_is_the_raw_one_over_the_gain(tiny_ltao, monkeypatch):
+    """The reconstruction is linear in the slopes: with every sub-aperture's gain g in
+    [g_min, g_max], the calibrated open-loop rms is the raw one times 1/g within them."""
+    study, run = tiny_ltao
+    config, raw = run()
+    monkeypatch.setattr(calibration_product, "CALIBRATION_DRAWS", 8)
+    spec = calibration_spec(study, deep_merge(config, {"wfs": {"calibration": "dither"}}))
+    product = calibration_product.build_calibration(spec)
+    gains = product["response"].values[[0, 1], [0, 1]]
+    _, calibrated = run(product, calibration="dither")
+    ratio = calibrated.lgs_rms_nm.values / raw.lgs_rms_nm.values
+    assert 0.6 < gains.min() and gains.max() < 1.0
+    assert np.all(ratio > 0.95 / gains.max()) and np.all(ratio < 1.05 / gains.min())
+    with pytest.raises(ValueError, match="calibration product"):
+        run(None, calibration="dither")
