@@ -39,9 +39,9 @@ def sensor(n_sub: int, beacon: str):
 def known_phases(wfs):
     """Phases [rad at 500 nm] (k, n, n) of a tilt and of low-order aberrations (defocus,
     astigmatism, coma), their analytic gradients [rad of slope] (k, 2, n, n), with edge
-    slopes of about 0.25" (as large as the turbulence's)."""
+    slopes of 0.15" (the turbulence's sub-aperture slopes at r0 = 20 cm)."""
     x, y = (c / 2.1 for c in wfs.grid.xy_m)  # unit pupil radius
-    theta = 0.25 * ARCSEC_RAD
+    theta = 0.15 * ARCSEC_RAD
     scale = theta * 2.1  # optical path [m] for a slope theta over the pupil radius
     paths = [(x, (np.ones_like(x), 0 * x)),
              (y, (0 * x, np.ones_like(x))),
@@ -86,7 +86,7 @@ def responses(wfs, elongation, seeing, estimate, draws, seed):
 @pytest.mark.parametrize("r0_m", [0.10, 0.135, 0.20])
 def test_calibrated_slopes_are_the_geometric_slopes(n_sub, beacon, r0_m):
     """Under turbulence of r0 (cone-compressed layers), the calibrated slopes of a known
-    tilt and of known low-order phases (0.25" at the edge) are their geometric slopes
+    tilt and of known low-order phases (0.15" at the edge) are their geometric slopes
     within 5 % (least-squares gain over every sub-aperture and axis), with turbulence
     draws independent of the calibration's, and sub-aperture by sub-aperture within the
     draws' sampling error (4-9 % rms here: 64 calibration and 16 test samples); the raw

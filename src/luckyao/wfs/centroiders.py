@@ -24,6 +24,7 @@ images, :mod:`.detector` adds their noise): each maps images
 
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 
 from .kernels import centroids
@@ -85,22 +86,24 @@ class Correlation:
     def __init__(self, wfs: ShackHartmann, reference_spectra: np.ndarray, iterations: int = 4):
         if reference_spectra.shape != (wfs.n_valid, wfs.fft_size, wfs.fft_size // 2 + 1):
             raise ValueError("reference spectra must be (n_valid, M, M//2+1) of this WFS")
-        self.wfs, self.iterations = wfs, iterations
-        self.reference = np.asarray(reference_spectra, dtype=np.complex64)
-        f_y, f_x = wfs.harmonics
-        self._f = (f_x[None, :].astype(np.float32), f_y[:, None].astype(np.float32))
+        self.iterations = iterations
         self._cog = CentreOfGravity(wfs)
-        self._reference_cog = self._cog.positions(pixel_images(wfs, self.reference)[None])[0]  # (2, n_valid)
+        self._reference_cog = self._cog.positions(pixel_images(wfs, reference_spectra)[None])[0]  # (2, n_valid)
+        # a sub-aperture's intensity has no harmonics beyond its n_s samples: keep |q|, p < n_s
+        n_s, m = wfs.samples_per_subaperture, wfs.fft_size
+        q = np.arange(1 - n_s, n_s) % m
+        self.reference = np.ascontiguousarray(np.asarray(reference_spectra)[:, q, :n_s], dtype=np.complex64)
+        f_y, f_x = wfs.harmonics
+        self._f_x, self._f_y = f_x[:n_s].astype(np.float64), f_y[q].astype(np.float64)
+        e_y, e_x = wfs._pixel_integrals  # pixel integration, P = Re(E_y D E_x^T)
+        self._e_y, self._e_x = e_y[:, q], e_x[:, :n_s]
 
     def _model(self, delta: np.ndarray):
         """The reference images moved by ``delta`` (n_b, 2, n_valid) [rad], and their
         derivatives along x and y: 3 x (n_b, n_valid, p, p)."""
-        f_x, f_y = self._f
-        dx, dy = delta[:, 0, :, None, None], delta[:, 1, :, None, None]
-        moved = self.reference[None] * np.exp(-2j * np.pi * (f_x * dx + f_y * dy)).astype(np.complex64)
-        return (pixel_images(self.wfs, moved),
-                pixel_images(self.wfs, moved * (-2j * np.pi * f_x)),
-                pixel_images(self.wfs, moved * (-2j * np.pi * f_y)))
+        out = np.empty((3, delta.shape[0], delta.shape[2]) + (self._e_y.shape[0],) * 2)
+        _moved_reference(self.reference, self._e_y, self._e_x, self._f_y, self._f_x, delta.astype(np.float64), out)
+        return out[0], out[1], out[2]
 
     def positions(self, images: np.ndarray, remove_tilt: bool = False) -> np.ndarray:
         images = np.asarray(images, dtype=np.float32)
@@ -118,6 +121,44 @@ class Correlation:
             delta = delta + np.moveaxis(step[..., 1:], -1, 1)
         out = np.where(flux[:, None, :] > 0, delta, 0.0).astype(np.float32)
         return subtract_tilt(out) if remove_tilt else out
+
+
+@numba.njit(cache=True, nogil=True)
+def _moved_reference(reference, e_y, e_x, f_y, f_x, delta, out):  # pragma: no cover (jit)
+    """out[0, b, v] = Re(E_y (R_v x a) E_x^T), a = exp(-2 pi i (f_x dx + f_y dy)) the
+    shift ``delta[b, :, v]``; out[1], out[2]: its derivatives along x and y. The shift
+    is separable, so it is applied to the pixel integrals' columns."""
+    n_b, n_v, n_pix = delta.shape[0], delta.shape[2], e_y.shape[0]
+    n_q, n_p = f_y.size, f_x.size
+    rows = np.empty((n_pix, n_p), dtype=np.complex128)
+    rows_dy = np.empty((n_pix, n_p), dtype=np.complex128)
+    for b in range(n_b):
+        for v in range(n_v):
+            a_y = np.exp(-2j * np.pi * f_y * delta[b, 1, v])
+            a_x = np.exp(-2j * np.pi * f_x * delta[b, 0, v])
+            for j in range(n_pix):
+                for p in range(n_p):
+                    total = 0j
+                    total_dy = 0j
+                    for q in range(n_q):
+                        term = e_y[j, q] * a_y[q] * reference[v, q, p]
+                        total += term
+                        total_dy += term * (-2j * np.pi * f_y[q])
+                    rows[j, p] = total
+                    rows_dy[j, p] = total_dy
+            for j in range(n_pix):
+                for k in range(n_pix):
+                    value = 0j
+                    value_dx = 0j
+                    value_dy = 0j
+                    for p in range(n_p):
+                        column = e_x[k, p] * a_x[p]
+                        value += rows[j, p] * column
+                        value_dx += rows[j, p] * column * (-2j * np.pi * f_x[p])
+                        value_dy += rows_dy[j, p] * column
+                    out[0, b, v, j, k] = value.real
+                    out[1, b, v, j, k] = value_dx.real
+                    out[2, b, v, j, k] = value_dy.real
 
 
 def centroids_rad(wfs: ShackHartmann, images: np.ndarray, remove_tilt: bool = False) -> np.ndarray:
