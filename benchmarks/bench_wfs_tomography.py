@@ -32,6 +32,8 @@ from luckyao.tomography.slopes import SlopeGeometry, slope_covariance  # noqa: E
 from luckyao.wfs import kernels as wk  # noqa: E402
 from luckyao.wfs import shack_hartmann as sh  # noqa: E402
 from luckyao.wfs.beacons import LgsConfig  # noqa: E402
+from luckyao.wfs.centroiders import centroids_rad  # noqa: E402
+from luckyao.wfs.sensor import measure_slopes  # noqa: E402
 
 BASE = load_study(Path(__file__).resolve().parents[1] / "config" / "config.yaml")[0]["base"]
 TELESCOPE = telescope_from(BASE["telescope"])
@@ -77,9 +79,9 @@ def per_step() -> None:
     geometry = SlopeGeometry.from_wfs(wfs, lgs)
     points = pupil_points(TELESCOPE, wfs.subaperture_m / 2)[2]
     rec = target_reconstructor(PRIOR, geometry, NOISE_RAD, points)
-    slopes = sh.measure_slopes(wfs, downlink, 500e-9, elongation, uplink)
+    slopes = measure_slopes(wfs, downlink, 500e-9, elongation, uplink)
 
-    t_wfs = best_ms(lambda: sh.measure_slopes(wfs, downlink, 500e-9, elongation, uplink))
+    t_wfs = best_ms(lambda: measure_slopes(wfs, downlink, 500e-9, elongation, uplink))
     t_images = best_ms(lambda: sh.exposure_images(wfs, downlink, 500e-9, elongation, uplink))
     images = sh.exposure_images(wfs, downlink, 500e-9, elongation, uplink)
     t_rec = best_ms(lambda: lgs_rms_nm(rec, slopes), number=200)
@@ -114,7 +116,7 @@ def per_step() -> None:
         "x autocorrelation": steps * best_ms(lambda: correlate(g, h, True)),
         "ky DFTs": n_chunks * best_ms(lambda: spectrum(h, c)),
         "OTF x pixels": n_chunks * best_ms(lambda: pixel(c, el, weights, pixels)),
-        "centroids + tilt": best_ms(lambda: sh.centroids_rad(wfs, images, remove_tilt=True)),
+        "centroids + tilt": best_ms(lambda: centroids_rad(wfs, images, remove_tilt=True)),
     }
     stages["driver + Python"] = t_wfs - sum(stages.values())
     print("  ms per exposure: " + ", ".join(f"{name} {t:.3f}" for name, t in stages.items()))

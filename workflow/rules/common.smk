@@ -8,7 +8,8 @@ from luckyao.study.live_run import hold_shared
 from luckyao.study.resources import (commands_memory_bytes, lucky_memory_bytes, machine_memory_bytes, mem_mb,
                                      preflight, reconstructor_memory_bytes, simulate_memory_bytes,
                                      turbulence_memory_bytes)
-from luckyao.study.config import (ConfigError, canonical_json, commands_key, commands_spec, imaged_targets,
+from luckyao.study.config import (ConfigError, calibration_key, calibration_spec, canonical_json, commands_key,
+                                  commands_spec, imaged_targets,
                                   lucky_settings, reconstructor_key, reconstructor_spec, sweep_detectors,
                                   turbulence_key, turbulence_spec, validate_study)
 
@@ -32,6 +33,8 @@ RECONSTRUCTOR = {name: reconstructor_spec(case) for name, case in CASES.items()}
 RECONSTRUCTOR_BY_KEY = {reconstructor_key(s): s for s in RECONSTRUCTOR.values() if s is not None}
 COMMANDS = {name: commands_spec(case) for name, case in CASES.items()}
 COMMANDS_BY_KEY = {commands_key(s): s for s in COMMANDS.values() if s is not None}
+CALIBRATION = {name: calibration_spec(STUDY, case) for name, case in CASES.items()}
+CALIBRATION_BY_KEY = {calibration_key(s): s for s in CALIBRATION.values() if s is not None}
 LUCKYAO = ("OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1 NUMBA_NUM_THREADS=1 "
            f"{shlex.quote(sys.executable)} -m luckyao")  # every value formatted into a command is quoted (:q)
 
@@ -48,6 +51,12 @@ def commands_file(case):
     return f"results/commands/{commands_key(spec)}.nc" if spec else []
 
 
+def calibration_file(case):
+    """The case's cached WFS calibration file, or [] without one."""
+    spec = CALIBRATION[case]
+    return f"results/calibrations/{calibration_key(spec)}.nc" if spec else []
+
+
 def frames_output(path):
     return path if STUDY.get("keep_frames", False) else temp(path)
 
@@ -57,6 +66,7 @@ wildcard_constraints:
     key="screens_[0-9a-f]{12}",
     rkey="reconstructor_[0-9a-f]{12}",
     ckey="commands_[0-9a-f]{12}",
+    wkey="calibration_[0-9a-f]{12}",
     fig="|".join(re.escape(f) for f in STUDY["figures"]),
 
 

@@ -5,6 +5,7 @@ rule simulate:
         screens_metadata=lambda w: f"results/turbulence/{turbulence_key(TURBULENCE[w.case])}.nc",
         reconstructor=lambda w: reconstructor_file(w.case),
         commands=lambda w: commands_file(w.case),
+        calibration=lambda w: calibration_file(w.case),
         code=step_sources("simulation"),
     output:
         frames=frames_output("results/cases/{case}/frames.nc"),
@@ -13,7 +14,8 @@ rule simulate:
         case=lambda w: canonical_json(CASES[w.case]),
         seed=STUDY["seed"],
         products=lambda w, input: ((["--reconstructor", input.reconstructor] if input.reconstructor else [])
-                                   + (["--commands", input.commands] if input.commands else [])),
+                                   + (["--commands", input.commands] if input.commands else [])
+                                   + (["--calibration", input.calibration] if input.calibration else [])),
     threads: 1
     priority: lambda w: simulate_priority(w.case)
     resources:

@@ -166,6 +166,27 @@ def strip_screen(spec: StripSpec, outer_scale_m: float, rng: np.random.Generator
     return screen
 
 
+def periodic_screen_amplitude(psd, n: int, dx_m: float) -> np.ndarray:
+    """``sqrt(Phi(f) df^2)`` (n, n) on the FFT frequencies of an (n, n) grid of spacing
+    ``dx_m``, no piston: the amplitudes of :func:`periodic_screen_pair` for the power
+    spectrum ``psd(f)`` [rad^2 m^2] (a callable of the frequency [1/m])."""
+    f = np.fft.fftfreq(n, dx_m)
+    amplitude = np.sqrt(psd(np.hypot(f[:, None], f[None, :]))) / (n * dx_m)
+    amplitude[0, 0] = 0.0
+    return amplitude
+
+
+def periodic_screen_pair(amplitude: np.ndarray, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """Two independent periodic phase screens (n, n) float64: the real and imaginary parts
+    of ``sum_f c_f sqrt(Phi(f) df^2) exp(2 pi i f.r)``, ``c_f`` complex unit normal
+    (McGlamery 1976), ``amplitude`` from :func:`periodic_screen_amplitude`. No
+    subharmonics: scales beyond the screen are missing, so use them on a pupil several
+    times smaller (draws of sub-aperture-scale statistics, not the time series)."""
+    normal = rng.standard_normal((2,) + amplitude.shape)
+    screen = scipy.fft.ifft2(amplitude * (normal[0] + 1j * normal[1]), norm="forward")
+    return screen.real, screen.imag
+
+
 @dataclass(frozen=True, eq=False)
 class ScreenSet:
     """Every layer's strip, flattened into one float32 buffer (possibly memory-mapped).

@@ -18,13 +18,16 @@ from ..optics.pupil import Telescope
 from ..tomography.prior import TurbulencePrior
 from ..units import ARCSEC_RAD
 from ..wfs.beacons import LgsConfig
+from ..wfs.calibration import BeaconSeeing
 from ..wfs.shack_hartmann import ShackHartmann
 from .config import frame_count
 
 
 @dataclass(frozen=True)
 class WfsSettings:
-    """One LGS Shack-Hartmann per beacon: its geometry, exposure and detector noise."""
+    """One LGS Shack-Hartmann per beacon: its geometry, exposure, detector noise and slope
+    estimator (``centroider``, its ``threshold`` for ``tcog``, and ``calibration``: none,
+    or ``dither`` for the calibrated response, :mod:`luckyao.wfs.calibration`)."""
 
     n_subapertures: int
     n_pixels: int
@@ -33,6 +36,9 @@ class WfsSettings:
     min_illumination: float
     photons_per_subaperture: float | None
     read_noise_e: float
+    centroider: str = "cog"
+    threshold: float = 0.2
+    calibration: str = "none"
 
     def shack_hartmann(self, telescope: Telescope, lgs: LgsConfig) -> ShackHartmann:
         """The sensor of these settings at the beacons' wavelength."""
@@ -95,6 +101,12 @@ def wfs_from(block: dict) -> WfsSettings:
     return WfsSettings(**block)
 
 
+def seeing_from(atmosphere: dict, lgs: LgsConfig) -> BeaconSeeing:
+    """The turbulence the beacons see, for the mean r0 of an ``atmosphere`` block."""
+    return BeaconSeeing(atmosphere["r0_500nm_m"], atmosphere["outer_scale_m"], tuple(atmosphere["height_m"]),
+                        tuple(atmosphere["cn2_fraction"]), lgs.height_m)
+
+
 def tomography_from(block: dict) -> TomographySettings:
     prior = TurbulencePrior(block["prior_r0_500nm_m"], block["prior_outer_scale_m"],
                             tuple(block["layer_heights_m"]), tuple(block["layer_cn2_fraction"]))
@@ -123,6 +135,8 @@ class Case:
     wfs: WfsSettings
     tomography: TomographySettings
     ao: AoSettings
+    seeing: BeaconSeeing | None = None
+    """The turbulence as the beacons see it at the mean r0 (the seeing the WFS calibration assumes)."""
 
     @classmethod
     def from_config(cls, case: dict) -> "Case":
@@ -143,6 +157,7 @@ class Case:
             wfs=wfs_from(case["wfs"]),
             tomography=tomography_from(case["tomography"]),
             ao=ao_from(case["ao"]),
+            seeing=seeing_from(atm, lgs_from(case["lgs"])) if case["lgs"]["enabled"] else None,
         )
 
     def layer_scales(self, steps) -> np.ndarray:

@@ -3,8 +3,9 @@
     luckyao check CONFIG [OVERLAY ...]
     luckyao turbulence --spec JSON --screens S.npy --metadata S.nc
     luckyao simulate --case JSON --name NAME --seed N --screens S.npy --screens-metadata S.nc
-                     [--reconstructor R.nc] [--commands C.nc] --frames F --telemetry T
+                     [--reconstructor R.nc] [--commands C.nc] [--calibration W.nc] --frames F --telemetry T
     luckyao reconstructor --spec JSON --out R.nc
+    luckyao calibration --spec JSON --out W.nc
     luckyao commands --spec JSON --out C.nc
     luckyao lucky --settings JSON --frames F --telemetry T --out lucky.nc [--screens S.npy --screens-metadata S.nc]
     luckyao figure --id ID --settings JSON --out-prefix figures/ID  lucky.nc ...
@@ -63,7 +64,9 @@ def cmd_simulate(args) -> None:
     sensor = estimator = None
     if args.reconstructor:
         reconstructors = open_dataset(args.reconstructor, "reconstructor", allow_nan=())["reconstructor"].values
-        sensor, estimator = lgs_chain(case, screens, reconstructors, args.seed)
+        calibration = (open_dataset(args.calibration, "WFS calibration", allow_nan=()) if args.calibration
+                       else None)
+        sensor, estimator = lgs_chain(case, screens, reconstructors, args.seed, calibration)
     commands = None
     if args.commands:
         products = open_dataset(args.commands, "AO command", allow_nan=())
@@ -100,6 +103,16 @@ def cmd_commands(args) -> None:
     spec = json.loads(args.spec)
     ds = build_commands(spec)
     ds.attrs.update(provenance("luckyao AO command matrix", spec, 0))
+    write_dataset(ds, args.out, compress=False)
+
+
+def cmd_calibration(args) -> None:
+    from .calibration import build_calibration
+    from .datasets import provenance, write_dataset
+
+    spec = json.loads(args.spec)
+    ds = build_calibration(spec)
+    ds.attrs.update(provenance("luckyao WFS slope-response calibration", spec, spec["seed"]))
     write_dataset(ds, args.out, compress=False)
 
 
@@ -184,6 +197,7 @@ def main(argv=None) -> int:
     p.add_argument("--screens-metadata", required=True)
     p.add_argument("--reconstructor", default="", help="reconstructor file (cases with LGS)")
     p.add_argument("--commands", default="", help="AO command-matrix file (cases with AO)")
+    p.add_argument("--calibration", default="", help="WFS calibration file (cases with wfs.calibration)")
     p.add_argument("--frames", required=True)
     p.add_argument("--telemetry", required=True)
     p.set_defaults(func=cmd_simulate)
@@ -197,6 +211,11 @@ def main(argv=None) -> int:
     p.add_argument("--spec", required=True, help="command-matrix spec as JSON")
     p.add_argument("--out", required=True)
     p.set_defaults(func=cmd_commands)
+
+    p = sub.add_parser("calibration", help="measure the WFS slope response of a case")
+    p.add_argument("--spec", required=True, help="calibration spec as JSON")
+    p.add_argument("--out", required=True)
+    p.set_defaults(func=cmd_calibration)
 
     p = sub.add_parser("lucky", help="detector noise, selection, shift-and-add, scores")
     p.add_argument("--settings", required=True, help="lucky settings as JSON")

@@ -310,6 +310,23 @@ def commands_key(spec: dict) -> str:
     return "commands_" + sha256(spec)[:12]
 
 
+def calibration_spec(study: dict, case: dict) -> dict | None:
+    """Everything a case's WFS calibration depends on (None without LGS or calibration):
+    the sensor, its estimator and the seeing (the mean r0; not the winds, the noise or
+    the exposure time, so cases that differ only there share it)."""
+    wfs = case["wfs"]
+    if not case["lgs"]["enabled"] or wfs.get("calibration", "none") == "none":
+        return None
+    atm = case["atmosphere"]
+    return {"seed": study["seed"], "telescope": case["telescope"], "lgs": case["lgs"],
+            "wfs": {k: v for k, v in wfs.items() if k not in ("photons_per_subaperture", "read_noise_e", "exposure_steps")},
+            "atmosphere": {k: atm[k] for k in ("r0_500nm_m", "outer_scale_m", "height_m", "cn2_fraction")}}
+
+
+def calibration_key(spec: dict) -> str:
+    return "calibration_" + sha256(spec)[:12]
+
+
 def error_blocks(lucky: dict) -> int:
     """Time blocks for the Monte-Carlo errors: ``lucky.error_blocks``, by default 5 (the schema's)."""
     return lucky.get("error_blocks", 5)

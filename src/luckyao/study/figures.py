@@ -487,12 +487,17 @@ def _correlations(estimate: np.ndarray, truth: np.ndarray) -> tuple[float, float
 
 def residuals_data(settings: dict, names, datasets) -> xr.Dataset:
     """Per frame, the open-loop and pseudo-closed-loop LGS rms along the target and the
-    true corrected rms, with the correlations of each estimate with the truth."""
+    true corrected rms, with the correlations of each estimate with the truth, and of the
+    pseudo-closed-loop rms with the open-loop rms (the paper: highly correlated, the
+    residual consistently lower)."""
     series = {name: np.stack([ds[name].isel(target=0).values for ds in datasets])
               for name in ("lgs_rms_nm", "lgs_residual_rms_nm", "true_rms_nm")}
     estimates = ["lgs_rms_nm", "lgs_residual_rms_nm"]
     pairs = np.array([[_correlations(series[e][c], series["true_rms_nm"][c]) for e in estimates]
                       for c in range(len(datasets))])  # (case, estimate, kind)
+    open_loop = np.array([_correlations(series["lgs_residual_rms_nm"][c], series["lgs_rms_nm"][c])
+                          for c in range(len(datasets))])  # (case, kind)
+    lower = (series["lgs_residual_rms_nm"] < series["lgs_rms_nm"]).mean(axis=1)
     return xr.Dataset(
         {
             **{name: (("case", "frame"), values, dict(datasets[0][name].attrs)) for name, values in series.items()},
@@ -500,6 +505,12 @@ def residuals_data(settings: dict, names, datasets) -> xr.Dataset:
                         {"units": "1", "long_name": "Pearson correlation with true_rms_nm"}),
             "spearman": (("case", "estimate"), pairs[..., 1],
                          {"units": "1", "long_name": "rank correlation with true_rms_nm"}),
+            "pearson_open_loop": (("case",), open_loop[:, 0], {
+                "units": "1", "long_name": "Pearson correlation of lgs_residual_rms_nm with lgs_rms_nm"}),
+            "spearman_open_loop": (("case",), open_loop[:, 1], {
+                "units": "1", "long_name": "rank correlation of lgs_residual_rms_nm with lgs_rms_nm"}),
+            "residual_lower_fraction": (("case",), lower, {
+                "units": "1", "long_name": "fraction of frames whose lgs_residual_rms_nm is below lgs_rms_nm"}),
         },
         coords={**_case_coords(settings, names, datasets),
                 "estimate": ("estimate", estimates, {"long_name": "LGS estimate of the residual"}),

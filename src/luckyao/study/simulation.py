@@ -25,16 +25,20 @@ from ..progress import Progress
 from ..tomography.criterion import LgsRmsEstimator, lucky_frame_rms_nm
 from ..units import ARCSEC_RAD, REFERENCE_WAVELENGTH_M, phase_rad_to_nm
 from ..wfs.sensor import LgsSensor
+from .calibration import slope_estimator
 from .case import Case
 from .datasets import require_finite
 
 
 def lgs_chain(case: Case, screens: ScreenSet, reconstructors: np.ndarray,
-              seed: int) -> tuple[LgsSensor, LgsRmsEstimator]:
-    """The case's LGS sensor and its estimator (``reconstructors`` (target, point, slope))."""
+              seed: int, calibration=None) -> tuple[LgsSensor, LgsRmsEstimator]:
+    """The case's LGS sensor and its estimator (``reconstructors`` (target, point, slope)),
+    its slopes calibrated by ``calibration`` (:func:`.calibration.build_calibration`)
+    when the case asks for it."""
     wfs = case.wfs
     sensor = LgsSensor(case.lgs, case.shack_hartmann(), wfs.exposure_steps, list(case.layers), screens, seed,
                        wfs.photons_per_subaperture, wfs.read_noise_e)
+    sensor.estimator = slope_estimator(case, sensor.wfs, sensor.elongation, calibration)
     return sensor, LgsRmsEstimator(reconstructors, sensor.n_slopes)
 
 

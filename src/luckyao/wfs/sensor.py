@@ -4,7 +4,7 @@ For each of an exposure's ``exposure_steps`` time steps the downlink phase of
 every beacon (cone effect) is sampled on the WFS pupil grid and the uplink
 phase on the launch aperture (the upward beam's cone, anchored on the launch
 position, :func:`luckyao.geometry.uplink_line_of_sight`). The exposure's
-physical-optics images give tilt-removed slopes (:func:`.shack_hartmann.measure_slopes`).
+physical-optics images give tilt-removed slopes (:func:`measure_slopes`).
 The sensor is open loop: it never sees the deformable mirror, so it can run
 ahead of the science steps it corrects.
 """
@@ -17,20 +17,47 @@ from ..geometry import LineOfSight, uplink_line_of_sight
 from ..optics.propagation import Propagator
 from ..units import REFERENCE_WAVELENGTH_M
 from .beacons import LgsConfig
-from .shack_hartmann import ShackHartmann, lgs_elongation_otf, measure_slopes
+from .centroiders import CentreOfGravity, SlopeEstimator
+from .detector import add_noise
+from .shack_hartmann import ShackHartmann, exposure_images, lgs_elongation_otf
+
+
+def measure_slopes(wfs: ShackHartmann, downlink_phase_rad: np.ndarray,
+                   phase_wavelength_m: float, elongation: np.ndarray | None = None,
+                   uplink_phase_rad: np.ndarray | None = None,
+                   photons_per_subaperture: float | None = None, read_noise_e: float = 0.0,
+                   rng: np.random.Generator | None = None,
+                   estimator: SlopeEstimator | None = None) -> np.ndarray:
+    """Tilt-removed slopes (n_beacons, 2, n_valid) [rad] of one exposure.
+
+    Chains the optics (:func:`.shack_hartmann.exposure_images`), the detector noise
+    (:func:`.detector.add_noise`, off unless ``photons_per_subaperture`` is given) and
+    the ``estimator`` (default: centre of gravity, uncalibrated).
+    """
+    images = exposure_images(wfs, downlink_phase_rad, phase_wavelength_m, elongation,
+                             uplink_phase_rad)
+    if photons_per_subaperture is not None:
+        if rng is None:
+            raise ValueError("noise needs an explicit rng")
+        images = add_noise(images, photons_per_subaperture, read_noise_e, rng)
+    if estimator is None:
+        estimator = SlopeEstimator(CentreOfGravity(wfs))
+    return estimator.slopes(images)
 
 
 class LgsSensor:
     """Every beacon's Shack-Hartmann of one case, sampling the shared screens.
 
     ``photons_per_subaperture`` None: noiseless; otherwise photon and read noise
-    drawn from ``default_rng([seed, 1])``.
+    drawn from ``default_rng([seed, 1])``. ``estimator``: images -> slopes
+    (default: centre of gravity, uncalibrated).
     """
 
     def __init__(self, lgs: LgsConfig, wfs: ShackHartmann, exposure_steps: int, layers: list[Layer],
                  screens: ScreenSet, seed: int, photons_per_subaperture: float | None = None,
-                 read_noise_e: float = 0.0):
+                 read_noise_e: float = 0.0, estimator: SlopeEstimator | None = None):
         self.lgs, self.wfs, self.exposure_steps = lgs, wfs, exposure_steps
+        self.estimator = SlopeEstimator(CentreOfGravity(wfs)) if estimator is None else estimator
         self.photons = photons_per_subaperture
         self.read_noise_e = read_noise_e
         self.rng = np.random.default_rng([seed, 1])
@@ -60,7 +87,7 @@ class LgsSensor:
         """Tilt-removed slopes (n_beacons, 2, n_valid) [rad] of the sampled exposure."""
         return measure_slopes(self.wfs, self._down_buffer, REFERENCE_WAVELENGTH_M, self.elongation,
                               self._up_buffer, self.photons, self.read_noise_e,
-                              self.rng if self.photons is not None else None)
+                              self.rng if self.photons is not None else None, self.estimator)
 
     def exposure_slopes(self, steps, layer_scales) -> np.ndarray:
         """Tilt-removed slopes (n_beacons, 2, n_valid) [rad] of the exposure of

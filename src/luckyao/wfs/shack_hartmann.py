@@ -16,10 +16,11 @@ Model (all sub-apertures of all beacons at once, no Python loop over them):
   stop, fed by identical neighbours).
 * Sign convention as in :mod:`luckyao.optics.imaging`: a phase ``2 pi theta x / lambda``
   moves the spot by ``+theta``; slopes have the sign of the phase gradient.
-* Centre of gravity over the ``n_pixels^2`` pixels gives the mean angle of
-  arrival [rad] = mean gradient of the optical path over the sub-aperture
-  (Primot 2003 / Teague) when the spot is resolved by the pixels; with 0.84"
-  pixels and a diffraction-limited spot it is quad-cell like (non-linear).
+* The images are all this module makes: their noise is :mod:`.detector`'s, the
+  slope estimators are :mod:`.centroiders`' (the centre of gravity gives the mean
+  angle of arrival [rad] = mean gradient of the optical path over the sub-aperture,
+  Primot 2003 / Teague, when the spot is resolved by the pixels; with 0.84"
+  pixels and a diffraction-limited spot it is quad-cell like, non-linear).
 
 Arrays: phases ``(..., n, n)`` indexed ``[y, x]``; slopes ``(n_beacons, 2, n_valid)``
 with axis 1 = (x, y) [rad]; images ``(n_beacons, n_valid, n_pixels, n_pixels)``.
@@ -35,7 +36,7 @@ import scipy.fft
 from ..optics.pupil import PupilGrid, Telescope
 from ..units import ARCSEC_RAD
 from .beacons import LgsConfig, altitude_limits_m, altitude_profile, elongation_offsets_rad
-from .kernels import centroids, exposure_kernel, lane_otf, uplink_kernel
+from .kernels import exposure_kernel, lane_otf, uplink_kernel
 
 
 @dataclass(frozen=True, eq=False)
@@ -483,47 +484,3 @@ def reference_exposure_images(wfs: ShackHartmann, downlink_phase_rad: np.ndarray
         uplink = uplink_otf(wfs, uplink_phase_rad, phase_wavelength_m).mean(axis=0)
         spectra *= uplink[:, None]
     return pixel_images(wfs, spectra)
-
-
-def add_noise(images: np.ndarray, photons_per_subaperture: float, read_noise_e: float,
-              rng: np.random.Generator) -> np.ndarray:
-    """Photon (Poisson) and read (Gaussian, ``read_noise_e`` rms) noise, new array.
-
-    ``images`` are in units of a full sub-aperture's flux over the exposure
-    (see :func:`exposure_images`); ``photons_per_subaperture`` is the detected
-    photon count of a full sub-aperture in one exposure.
-    """
-    expected = np.clip(images, 0, None) * photons_per_subaperture
-    noisy = rng.poisson(expected).astype(np.float32)
-    if read_noise_e > 0:
-        noisy += rng.normal(0.0, read_noise_e, size=noisy.shape).astype(np.float32)
-    return noisy / np.float32(photons_per_subaperture)
-
-
-def centroids_rad(wfs: ShackHartmann, images: np.ndarray, remove_tilt: bool = False) -> np.ndarray:
-    """Centre of gravity (n_beacons, 2, n_valid) [rad] of images (n_b, n_valid, p, p);
-    with ``remove_tilt``, less each beacon's mean x and y (the LGS tilt is unknown)."""
-    images = np.asarray(images, dtype=np.float32)
-    out = np.empty((images.shape[0], 2, images.shape[1]), dtype=np.float32)
-    centroids(images, wfs.pixel_centres_rad, remove_tilt, out)
-    return out
-
-
-def measure_slopes(wfs: ShackHartmann, downlink_phase_rad: np.ndarray,
-                   phase_wavelength_m: float, elongation: np.ndarray | None = None,
-                   uplink_phase_rad: np.ndarray | None = None,
-                   photons_per_subaperture: float | None = None, read_noise_e: float = 0.0,
-                   rng: np.random.Generator | None = None) -> np.ndarray:
-    """Tilt-removed slopes (n_beacons, 2, n_valid) [rad] of one exposure.
-
-    Chains :func:`exposure_images`, optional :func:`add_noise` (off unless
-    ``photons_per_subaperture`` is given) and :func:`centroids_rad` with the
-    tilt removed.
-    """
-    images = exposure_images(wfs, downlink_phase_rad, phase_wavelength_m, elongation,
-                             uplink_phase_rad)
-    if photons_per_subaperture is not None:
-        if rng is None:
-            raise ValueError("noise needs an explicit rng")
-        images = add_noise(images, photons_per_subaperture, read_noise_e, rng)
-    return centroids_rad(wfs, images, remove_tilt=True)

@@ -1,0 +1,20 @@
+rule calibration:
+    """The WFS slope response (push-pull dithers through the sensor model), shared by every
+    case with the same sensor, estimator and mean seeing."""
+    input:
+        code=step_sources("calibration"),
+    output:
+        "results/calibrations/{wkey}.nc",
+    params:
+        spec=lambda w: canonical_json(CALIBRATION_BY_KEY[w.wkey]),
+    threads: 1
+    priority: 10  # before the screens: the simulations that use it wait for it
+    resources:
+        mem_mb=1500,
+        runtime=5,  # minutes
+    log:
+        "logs/calibration/{wkey}.log",
+    benchmark:
+        "results/benchmarks/calibration/{wkey}.tsv"
+    shell:
+        "{LUCKYAO} calibration --spec {params.spec:q} --out {output:q} 2> {log:q}"
