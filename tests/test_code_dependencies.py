@@ -24,7 +24,7 @@ EXPECTED = {
     "optics/farfield.py": {"simulate", "lucky", "figure"},
     "wfs/kernels.py": {"simulate", "lucky", "figure"},
     "lucky/metrics.py": {"lucky", "figure"},
-    "study/figures.py": {"figure"},
+    "study/figures/quality.py": {"figure"},
     "optics/long_exposure.py": {"figure"},
 }
 
