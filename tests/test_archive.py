@@ -35,8 +35,8 @@ def no_lgs_study() -> dict:
     jobs: the archive and verify do not depend on what the cases model)."""
     study = yaml.safe_load(TINY.read_text())
     cheap = {name for name, case in validate_study(study).items() if not case["lgs"]["enabled"]}
-    study["figures"] = {fig: f for fig, f in study["figures"].items() if set(f["cases"]) <= cheap}
-    shown = {case for f in study["figures"].values() for case in f["cases"]}
+    study["figures"] = {fig: f for fig, f in study["figures"].items() if set(f.get("cases", [])) <= cheap}
+    shown = {case for f in study["figures"].values() for case in f.get("cases", [])}
     study["cases"] = {name: case for name, case in study["cases"].items() if name in shown}
     assert study["figures"] and study["cases"]
     return study

@@ -30,15 +30,19 @@ def _provenance_cards(lucky: xr.Dataset) -> list[tuple]:
         ("TELDIAM", float(config["telescope"]["diameter_m"]), "[m] telescope diameter"),
         ("FRAMETIM", float(config["camera"]["frame_time_s"]), "[s] lucky frame exposure"),
         ("NFRAMES", int(lucky.sizes["frame"]), "lucky frames of the case"),
+        ("FRAMEPIX", int(lucky.attrs["n_pixels"]), "pixels across the whole frame"),
     ]
 
 
-def _wcs_cards(n: int, pixel_scale_arcsec: float) -> list[tuple]:
-    """Linear WCS: offsets from the optical axis (the pixel n // 2, 0-based) in arcsec."""
+def _wcs_cards(lucky: xr.Dataset, pixel_scale_arcsec: float) -> list[tuple]:
+    """Linear WCS: offsets from the optical axis (the pixel whose offset coordinate is 0)
+    in arcsec."""
     cards = [("WCSAXES", 2, "")]
-    for axis, name in ((1, "XOFFSET"), (2, "YOFFSET")):
-        cards += [(f"CTYPE{axis}", name, "offset from the optical axis"), (f"CUNIT{axis}", "arcsec", ""),
-                  (f"CRPIX{axis}", float(n // 2 + 1), "the optical axis pixel (1-based)"),
+    for axis, name in ((1, "x"), (2, "y")):
+        axis_pixel = int(np.flatnonzero(lucky[name].values == 0)[0]) + 1
+        cards += [(f"CTYPE{axis}", f"{name.upper()}OFFSET", "offset from the optical axis"),
+                  (f"CUNIT{axis}", "arcsec", ""),
+                  (f"CRPIX{axis}", float(axis_pixel), "the optical axis pixel (1-based)"),
                   (f"CRVAL{axis}", 0.0, ""), (f"CDELT{axis}", pixel_scale_arcsec, "[arcsec] pixel scale")]
     return cards + [("PIXSCALE", pixel_scale_arcsec, "[arcsec/pixel]")]
 
@@ -68,7 +72,7 @@ def image_hdus(lucky: xr.Dataset, detectors=None):
     unknown = set(detectors) - set(lucky.detector.values)
     if unknown:
         raise ValueError(f"unknown detectors {sorted(unknown)}; the case has {', '.join(lucky.detector.values)}")
-    common = _provenance_cards(lucky) + _wcs_cards(int(lucky.attrs["n_pixels"]), float(lucky.attrs["pixel_scale_arcsec"]))
+    common = _provenance_cards(lucky) + _wcs_cards(lucky, float(lucky.attrs["pixel_scale_arcsec"]))
     for t in range(lucky.sizes["target"]):
         target = lucky.isel(target=t)
         where = [("TARGET", t, "target index"),
@@ -104,7 +108,7 @@ def image_hdus(lucky: xr.Dataset, detectors=None):
 
 def _fitting(value, comment: str) -> str:
     """The comment, or none when it would not fit on the value's 80-character card."""
-    return comment if len(str(value)) + len(comment) < 64 else ""
+    return comment if max(20, len(str(value)) + 2) + len(comment) <= 66 else ""
 
 
 def _hdu(fits, image: np.ndarray, name: str, cards: list[tuple]):
