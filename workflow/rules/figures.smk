@@ -23,8 +23,9 @@ rule figure:
         code=step_sources("figures"),
     output:
         pdf="figures/{fig}.pdf",
-        png=report(
-            "figures/{fig}.png",
+        png="figures/{fig}.png",
+        page=report(  # the PNG in a page: the report opens it at the window's width
+            "figures/{fig}.html",
             caption="../report/figure.rst",
             category="Figures",
             labels=lambda w, output: figure_report_labels(w.fig, output.data),

@@ -2,7 +2,7 @@
 
 ``draw_figure`` builds the figure's dataset from the cases' ``lucky.nc`` files,
 writes it as ``<prefix>.nc`` and draws ``<prefix>.pdf`` and ``<prefix>.png``
-from that dataset alone. Each kind is a pair (data, drawing) in :data:`FIGURE_KINDS`;
+from that dataset alone, and ``<prefix>.html``, the PNG in a page (the report's view). Each kind is a pair (data, drawing) in :data:`FIGURE_KINDS`;
 the drawings use matplotlib's object API (no pyplot, no backend chosen at import) and
 one colour-blind-safe palette (``style``).
 
@@ -14,8 +14,11 @@ long_exposure_check, long_exposure_table, long_exposure_markdown, value_with_err
 gallery: psf_gallery.
 """
 
+import base64
+import html
 import json
 import logging
+from pathlib import Path
 
 from ..config import sha256
 from ..datasets import open_dataset, provenance, write_dataset
@@ -62,4 +65,14 @@ def draw_figure(fig_id: str, settings: dict, lucky_paths, out_prefix: str) -> No
     fig = draw(open_dataset(f"{out_prefix}.nc", "figure data"), fig_id)
     for ext in ("pdf", "png"):
         fig.savefig(f"{out_prefix}.{ext}", dpi=150)
+    Path(f"{out_prefix}.html").write_text(figure_page(fig_id, Path(f"{out_prefix}.png").read_bytes()))
     log.info("figure %s written", fig_id)
+
+
+def figure_page(fig_id: str, png: bytes) -> str:
+    """A one-image HTML page that shows the PNG at the width of the window (the report's
+    view of a figure: its image viewer can show a PNG zero pixels wide)."""
+    name = html.escape(fig_id)
+    return ("<!DOCTYPE html><html><head><meta charset=\"utf-8\"><title>" + name + "</title><style>body{margin:0}"
+            "img{display:block;width:100%;height:auto}</style></head><body><img alt=\"" + name + "\" "
+            "src=\"data:image/png;base64," + base64.b64encode(png).decode() + "\"></body></html>\n")
