@@ -65,7 +65,8 @@ def _case_style(ds: xr.Dataset, case) -> dict:
 
 def _legend_note(ds: xr.Dataset) -> str:
     dropped = any(int(ds[v].sum()) for v in ds.data_vars if v.endswith("_noise_dominated"))
-    return "; noise-dominated points left out" if dropped else ""
+    return (f"\nnoise-dominated points (more than {NOISE_DOMINATED:.0%} off the same selection on the noiseless "
+            "frames) left out") if dropped else ""
 
 
 def draw_quality_vs_fraction(ds: xr.Dataset, title: str):
@@ -89,7 +90,7 @@ def draw_quality_vs_fraction(ds: xr.Dataset, title: str):
         letter = f"({chr(ord('a') + r)}) " if n_rows > 1 else ""
         axes[r, 0].set_title(f"{letter}selection by {CRITERIA.get(criterion, criterion)}", loc="left", fontsize=10)
     fig.legend(*axes[0, 0].get_legend_handles_labels(), loc="outside lower center", ncol=4, fontsize=8,
-               title="colour: case; dotted: long exposure (no recentring); bands: ±1 Monte-Carlo standard error"
+               title="colour: case; dotted: long exposure (no recentring)\nbands: ±1 Monte-Carlo standard error"
                      + _legend_note(ds), title_fontsize=8)
     fig.suptitle(f"{title}: integrated-image quality vs fraction selected ({ds.attrs['detector']} detector)")
     return fig
@@ -155,8 +156,8 @@ def draw_quality_vs_distance(ds: xr.Dataset, title: str):
     ax.set_title("residual wavefront along the target", loc="left", fontsize=10)
     ax.grid(alpha=0.3)
     fig.legend(*axes[0, 0].get_legend_handles_labels(), loc="outside lower center", ncol=3, fontsize=8,
-               title="colour: case; line style and marker: fraction of frames; image criteria and recentring "
-                     "from the on-axis star, lgs_rms along each target; bands: ±1 Monte-Carlo standard error",
+               title="colour: case; line style and marker: fraction of frames\nimage criteria and recentring "
+                     "from the on-axis star, lgs_rms along each target\nbands: ±1 Monte-Carlo standard error",
                title_fontsize=8)
     fig.suptitle(f"{title}: integrated-image quality vs off-axis distance ({ds.attrs['detector']} detector)")
     return fig
@@ -222,7 +223,7 @@ def draw_quality_vs_parameter(ds: xr.Dataset, title: str):
         axes[r, 0].set_title(f"{letter}selection by {CRITERIA.get(criterion, criterion)}", loc="left", fontsize=10)
     fig.legend(*axes[0, 0].get_legend_handles_labels(), loc="outside lower center", ncol=ds.sizes["fraction"],
                fontsize=8, title="colour: the sweep's other parameters; line style and marker: fraction of frames "
-                                 "selected; error bars: ±1 Monte-Carlo standard error", title_fontsize=8)
+                                 "selected\nerror bars: ±1 Monte-Carlo standard error", title_fontsize=8)
     fig.suptitle(f"{title}: integrated-image quality vs {ds.attrs['parameter']} (sweep {ds.attrs['sweep']}, "
                  f"{ds.attrs['detector']} detector)")
     return fig
@@ -278,7 +279,7 @@ def draw_comparisons(ds: xr.Dataset, title: str):
         ax.set_ylabel(f"difference of {METRICS[metric]}")
         ax.grid(alpha=0.3)
     fig.legend(*axes[0, 0].get_legend_handles_labels(), loc="outside lower center", ncol=4, fontsize=8,
-               title="colour: difference a - b; bands: paired ±1 standard error (time blocks, shared turbulence); "
+               title="colour: difference a - b\nbands: paired ±1 standard error (time blocks, shared turbulence); "
                      "dotted: unpaired ±1 standard error", title_fontsize=8)
     fig.suptitle(f"{title}: paired differences of integrated-image quality ({ds.attrs['detector']} detector)")
     return fig

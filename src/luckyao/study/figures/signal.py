@@ -82,8 +82,8 @@ def draw_quality_vs_signal(ds: xr.Dataset, title: str):
                          "of frames", loc="left", fontsize=9)
             ax.grid(alpha=0.3)
     fig.legend(*axes[0, 0].get_legend_handles_labels(), loc="outside lower center", ncol=3, fontsize=8,
-               title="colour: selection criterion; line style: case; thin horizontal lines: noiseless detector; "
+               title="colour: selection criterion; line style: case; thin horizontal lines: noiseless detector\n"
                      f"bands: ±1 Monte-Carlo standard error; points more than {NOISE_DOMINATED:.0%} off the same "
-                     "selection on the noiseless frames are noise-dominated and left out", title_fontsize=8)
+                     "selection on the noiseless frames\nare noise-dominated and left out", title_fontsize=8)
     fig.suptitle(f"{title}: integrated-image {METRICS[metric]} vs signal per frame")
     return fig
