@@ -1,7 +1,6 @@
 """Friendly edges: report captions that no config text can add markup to, one-line
 errors from every command-line subcommand, and an ETA that starts after compilation."""
 
-import json
 import logging
 import subprocess
 import sys
