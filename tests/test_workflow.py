@@ -293,6 +293,6 @@ def test_the_report_has_short_captions_and_no_settings_json(finished_run):
     result = snakemake(workdir, "--report", str(workdir / "report.html"))
     assert result.returncode == 0, result.stderr[-3000:]
     html = (workdir / "report.html").read_text()
-    assert "case_configs" not in html and "settings=" not in html
+    assert "case_configs" not in html and 'settings={' not in html
     assert "Integrated-image quality vs a swept parameter" in html
     assert "no AO, r0 20 cm" in html  # the case good, in short
