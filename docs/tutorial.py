@@ -23,8 +23,9 @@ study["turbulence"].update(duration_s=0.5, min_along_m=30.0)
 study["base"]["duration_s"] = 0.5
 
 # 2. Run one case: any override of the study's base, here LTAO under poor seeing
-#    (r0 = 10 cm). The workflow's own steps run in this process: screens, tomographic
-#    reconstructor, AO command matrix, time loop, lucky imaging.
+#    (r0 = 10 cm). The workflow's own steps run as the workflow runs them, without
+#    Snakemake: screens, tomographic reconstructor, AO command matrix, time loop, lucky
+#    imaging (the same config and seed give the workflow's numbers).
 lucky = luckyao.run_case(study, {"ao": {"mode": "ltao"}, "atmosphere": {"r0_500nm_m": 0.10}},
                          name="ltao_r0_10cm", workdir=out / "run")
 

@@ -8,14 +8,17 @@ and run one case from a config dict without Snakemake (for exploration).
     study = luckyao.load_study("config/config.yaml")
     mine = luckyao.run_case(study, {"atmosphere": {"r0_500nm_m": 0.10}})   # an override of base
 
-``run_case`` runs the workflow's own steps in this process (screens, reconstructor,
-AO commands, time loop, post-processing), so its numbers are the workflow's for the
-same config and seed. A walk-through: ``docs/tutorial.py``.
+``run_case`` runs the workflow's own steps (screens, reconstructor, AO commands, time
+loop, post-processing) as the workflow runs them, without Snakemake, so its numbers are
+the workflow's for the same config and seed. A walk-through: ``docs/tutorial.py``.
 """
 
 import copy
 import json
+import os
 import shutil
+import subprocess
+import sys
 import tempfile
 from pathlib import Path
 
@@ -73,12 +76,20 @@ def export_fits(lucky_path, out_path, detectors=None) -> int:
     return export(lucky_path, out_path, detectors)
 
 
-def _step(*argv: str) -> None:
-    """One workflow step, as the workflow's command line runs it, in this process."""
-    from .study.cli import build_parser
+ONE_THREAD = {name: "1" for name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS",
+                                      "NUMBA_NUM_THREADS")}
+"""The numerical libraries pinned to one thread, as the workflow runs every step
+(``workflow/rules/common.smk``): the same rounding, so the same numbers."""
 
-    args = build_parser().parse_args(list(argv))
-    args.func(args)
+
+def _step(*argv: str) -> None:
+    """One workflow step, run as the workflow runs it: ``python -m luckyao <step> ...``
+    with the libraries on one thread; a failure raises with the step's own message."""
+    done = subprocess.run([sys.executable, "-m", "luckyao", *argv], env={**os.environ, **ONE_THREAD},
+                          capture_output=True, text=True)
+    if done.returncode:
+        last = (done.stderr.strip().splitlines() or ["no message"])[-1]
+        raise RuntimeError(f"luckyao {argv[0]} failed: {last}")
 
 
 def run_case(study: dict, case, name: str = "explore", workdir=None) -> xr.Dataset:
@@ -99,9 +110,13 @@ def run_case(study: dict, case, name: str = "explore", workdir=None) -> xr.Datas
         name = case
     else:
         raise ConfigError(f"run_case: no case {case!r} in the study; give its name or a dict of overrides of base")
-    study["figures"] = {f: v for f, v in study.get("figures", {}).items() if name in v.get("cases", [])}
-    resolved = validate_study({**study, "cases": {name: study["cases"][name]}})[name]
-    cases = {name: resolved}
+    # the case alone, with the figures that change its post-processing (the detector sweep)
+    signal = {f: dict(v, cases=[name]) for f, v in study.get("figures", {}).items()
+              if v["kind"] == "quality_vs_signal" and name in v.get("cases", [])}
+    study = {**{k: v for k, v in study.items() if k != "sweeps"}, "cases": {name: study["cases"][name]},
+             "figures": signal}
+    cases = validate_study(study)
+    resolved = cases[name]
     scratch = workdir is None
     root = Path(tempfile.mkdtemp(prefix="luckyao-") if scratch else workdir)
     root.mkdir(parents=True, exist_ok=True)

@@ -123,8 +123,8 @@ def draw_long_exposure_table(ds: xr.Dataset, title: str):
                                         f"{float(row.long_exposure_strehl_error.sel(recentring=r)):.4f}"
                                         for r in ("none", "cog")] + [best(row)]
              for row in (ds.sel(case=case) for case in ds.case.values)]
-    table = ax.table(cells, colLabels=["case", "long-exposure Strehl, no recentring",
-                                       "recentred (centre of gravity)", "best lucky Strehl"], loc="center",
+    table = ax.table(cells, colLabels=["case", "long exposure", "recentred (centroid)",
+                                       "best lucky Strehl (criterion, fraction)"], loc="center",
                      cellLoc="left", colWidths=[0.46, 0.15, 0.15, 0.24])
     table.auto_set_font_size(False)
     table.set_fontsize(7.5)
