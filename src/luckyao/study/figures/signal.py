@@ -81,9 +81,15 @@ def draw_quality_vs_signal(ds: xr.Dataset, title: str):
             ax.set_title(f"({chr(ord('a') + r * n_cols + f)}) read noise {read_noise:g} e-, {100 * fraction:g} % "
                          "of frames", loc="left", fontsize=9)
             ax.grid(alpha=0.3)
+    # the axis spans the values the noise leaves alone: at a few photons the recentring fails
+    # and the images blur far off the scale (arcsec)
+    settled = [ds[metric].isel(signal=-1).max()] + ([ds[f"{metric}_noiseless_detector"].max()]
+                                                    if f"{metric}_noiseless_detector" in ds else [])
+    axes[0, 0].set_ylim(0.0, 1.5 * float(max(settled)))
     fig.legend(*axes[0, 0].get_legend_handles_labels(), loc="outside lower center", ncol=3, fontsize=8,
                title="colour: selection criterion; line style: case; thin horizontal lines: noiseless detector\n"
                      f"bands: ±1 Monte-Carlo standard error; points more than {NOISE_DOMINATED:.0%} off the same "
-                     "selection on the noiseless frames\nare noise-dominated and left out", title_fontsize=8)
+                     "selection on the noiseless frames\nare noise-dominated and left out; values above the axis: blurred "
+                     "by recentring on noise", title_fontsize=8)
     fig.suptitle(f"{title}: integrated-image {METRICS[metric]} vs signal per frame")
     return fig
