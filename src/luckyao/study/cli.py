@@ -40,7 +40,9 @@ def cmd_check(args) -> int:
         return 1
     for warning in plausibility_warnings(cases):
         print(f"{' + '.join(args.config)}: warning: {warning}", file=sys.stderr)
-    unused = unused_cases(study)
+    from .sweeps import expand_sweeps
+
+    unused = unused_cases(expand_sweeps(study))
     if unused:
         print(f"{' + '.join(args.config)}: warning: no figure shows the cases {', '.join(unused)}", file=sys.stderr)
     print(f"{' + '.join(args.config)}: valid, {len(cases)} cases")

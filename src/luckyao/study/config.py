@@ -288,7 +288,7 @@ def criteria_of(case: dict) -> set[str]:
 def load_study(*paths) -> tuple[dict, dict]:
     """Read study YAML files, each deep-merged over the one before (as Snakemake's
     ``configfile:`` and ``--configfile`` do), and validate the result; returns
-    (config with its sweeps expanded, resolved cases)."""
+    (config as written, resolved cases: the sweeps' among them)."""
     config = {}
     for path in paths:
         try:
@@ -299,9 +299,6 @@ def load_study(*paths) -> tuple[dict, dict]:
         except yaml.YAMLError as err:
             raise ConfigError(f"config file '{path}' is not valid YAML: {err}") from err
         config = deep_merge(config, layer)
-    from .sweeps import expand_sweeps
-
-    config = expand_sweeps(config)
     return config, validate_study(config)
 
 
