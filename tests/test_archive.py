@@ -100,7 +100,7 @@ def test_archive_holds_config_results_figures_versions_and_checksums(study, arch
     manifest = json.loads(members["MANIFEST.json"])
     assert manifest["packages"]["numpy"] == np.__version__ and "luckyao" not in manifest["packages"]
     assert manifest["git_commit"] and manifest["code_version"] and manifest["python"]
-    assert set(manifest["cases"]) == set(study_config["cases"])
+    assert set(manifest["cases"]) == set(validate_study(study_config))  # with the sweeps' cases
     listed = dict(line.split("  ")[::-1] for line in members[CHECKSUMS].decode().splitlines())
     assert set(listed) == set(members) - {CHECKSUMS}
     assert all(hashlib.sha256(members[name]).hexdigest() == digest for name, digest in listed.items())
