@@ -20,5 +20,6 @@ include: "workflow/rules/figures.smk"
 
 rule all:
     input:
-        expand("figures/{fig}.{ext}", fig=list(STUDY["figures"]), ext=["pdf", "png", "nc"]),
+        expand("figures/{fig}.{ext}", fig=list(STUDY["figures"]), ext=["pdf", "png", "html", "nc"]),
+        expand("fits/{case}.fits", case=DRAWN_CASES),
     default_target: True

@@ -22,12 +22,13 @@ TINY = REPO / "tests" / "data" / "tiny.yaml"
 
 # module edited -> rules that must rerun (the step that runs it and everything after it)
 EXPECTED = {
-    "atmosphere/screens.py": {"turbulence", "simulate", "lucky", "figure"},
-    "optics/farfield.py": {"simulate", "lucky", "figure"},
-    "wfs/kernels.py": {"simulate", "lucky", "figure"},
-    "lucky/metrics.py": {"lucky", "figure"},
-    "study/figures.py": {"figure"},
+    "atmosphere/screens.py": {"turbulence", "simulate", "lucky", "figure", "export"},
+    "optics/farfield.py": {"simulate", "lucky", "figure", "export"},
+    "wfs/kernels.py": {"simulate", "lucky", "figure", "export"},
+    "lucky/metrics.py": {"lucky", "figure", "export"},
+    "study/figures/quality.py": {"figure"},
     "optics/long_exposure.py": {"figure"},
+    "study/export.py": {"export"},
 }
 
 
@@ -40,7 +41,7 @@ def _snakemake(copy: Path, workdir: Path, *args):
 
 def _rules_planned(result) -> set[str]:
     return {line.split()[1].rstrip(":") for line in result.stdout.splitlines()
-            if line.strip().startswith("rule ")} - {"all"}
+            if line.strip().startswith(("rule ", "localrule "))} - {"all"}
 
 
 @pytest.fixture(scope="module")
@@ -114,4 +115,4 @@ def test_a_post_processing_setting_reruns_no_time_loop(study_copy):
     copy, workdir = study_copy
     overlay = workdir / "fractions.yaml"
     overlay.write_text(yaml.safe_dump({"lucky": {"fractions": [0.05, 0.1, 0.5, 1.0]}}))
-    assert _rules_planned(_snakemake(copy, workdir, "--dry-run", "--configfile", str(overlay))) == {"lucky", "figure"}
+    assert _rules_planned(_snakemake(copy, workdir, "--dry-run", "--configfile", str(overlay))) == {"lucky", "figure", "export"}

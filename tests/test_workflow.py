@@ -242,3 +242,106 @@ def test_a_study_too_large_for_this_machine_is_refused_before_any_job(tmp_path, 
     assert result.returncode != 0
     assert re.search(expected, result.stdout + result.stderr), result.stderr[-2000:]
     assert not (tmp_path / "results").exists()
+
+
+def test_a_sweep_figure_draws_every_point_and_a_new_value_reruns_only_its_case(finished_run):
+    """The tiny study's sweep over r0 (0.2 m: the case good; 0.15 m: a case of its own)
+    is drawn with each point's values from its case; adding a value plans only the new
+    case's jobs and the figures that show it."""
+    workdir, config = finished_run
+    sweep = xr.open_dataset(workdir / "figures" / "sweep.nc")
+    assert list(sweep.x.values) == [0.2, 0.15]
+    assert list(sweep.case.values.ravel()) == ["good", "r0_r0_500nm_m-0.15"]
+    for j, case in enumerate(sweep.case.values.ravel()):
+        lucky = xr.open_dataset(workdir / "results" / "cases" / case / "lucky.nc")
+        expected = lucky.sel(criterion="strehl", detector="noiseless", fraction=[0.1, 1.0]).isel(target=0)
+        for name in ("strehl", "strehl_error", "d50_arcsec"):
+            np.testing.assert_array_equal(sweep[name].isel(series=0, x=j).sel(criterion="strehl").values,
+                                          expected[name].values)
+    study = yaml.safe_load(config.read_text())
+    study["sweeps"]["r0"]["parameters"]["atmosphere.r0_500nm_m"].append(0.3)
+    overlay = workdir / "more_r0.yaml"
+    overlay.write_text(yaml.safe_dump(study))
+    result = snakemake(workdir, "--dry-run", "--configfile", str(overlay))
+    assert result.returncode == 0, result.stderr
+    jobs = jobs_planned(result)
+    assert {w for rule, w in jobs if rule in ("simulate", "lucky", "export")} == {"case=r0_r0_500nm_m-0.3"}
+    assert {w for rule, w in jobs if rule == "figure"} == {"fig=sweep"}
+
+
+def test_fits_images_read_back_with_their_header_and_flux(finished_run):
+    """Every image of a case's lucky.nc is an extension of fits/<case>.fits with its pixels,
+    quality and errors, provenance and a WCS in arcsec; the tiny study keeps the whole
+    64-pixel frame, whose pixels are over its flux: each image sums to 1."""
+    from astropy.io import fits
+    from astropy.wcs import WCS
+
+    workdir, _ = finished_run
+    lucky = xr.open_dataset(workdir / "results" / "cases" / "good" / "lucky.nc")
+    with fits.open(workdir / "fits" / "good.fits") as hdus:
+        per_detector = lucky.sizes["criterion"] * lucky.sizes["fraction"] + lucky.sizes["recentring"]
+        assert hdus[0].header["NIMAGES"] == len(hdus) - 1 == per_detector * lucky.sizes["detector"]
+        for detector in lucky.detector.values:
+            cell = lucky.sel(criterion="strehl", fraction=0.1, detector=detector).isel(target=0)
+            image = hdus[f"LUCKY_T0_STREHL_0.1_{detector.upper()}"]
+            np.testing.assert_array_equal(image.data, cell.image.values)
+            for key, name in (("STREHL", "strehl"), ("STREHLE", "strehl_error"), ("FWHM", "fwhm_arcsec"),
+                              ("D50", "d50_arcsec"), ("D50E", "d50_arcsec_error")):
+                assert image.header[key] == pytest.approx(float(cell[name]), rel=1e-15), key  # a card's 20 digits
+            assert image.header["FLUXFRAC"] == pytest.approx(1.0, abs=1e-5)
+            assert float(image.data.sum(dtype=np.float64)) == pytest.approx(1.0, abs=1e-5)
+            assert image.header["DETECTOR"] == detector and image.header["CRITERIO"] == "strehl"
+        header = hdus["LONG_T0_NONE_NOISELESS"].header
+        assert header["STREHL"] == pytest.approx(float(lucky.long_exposure_strehl.sel(
+            recentring="none", detector="noiseless").isel(target=0)), rel=1e-15)
+        assert header["STREHLE"] == pytest.approx(float(lucky.long_exposure_strehl_error.isel(target=0)), rel=1e-15)
+        assert header["CFGHASH"] == lucky.attrs["config_sha256"] and header["SEED"] == 7
+        assert header["CODEVER"] == lucky.attrs["code_version"][:68] and header["WAVELENG"] == 8e-7
+        # the WCS puts the optical axis (pixel n/2 of the frame) at offset 0 and a pixel at 1.25"/64
+        wcs = WCS(header)
+        assert wcs.pixel_to_world_values(32, 32) == pytest.approx((0.0, 0.0))
+        assert wcs.pixel_to_world_values(33, 32)[0] == pytest.approx(1.25 / 64)
+
+
+def test_the_psf_gallery_shows_each_image_in_units_of_the_diffraction_limited_peak(finished_run):
+    """The gallery's images are the cases' images over the diffraction-limited peak, so each
+    panel's brightest pixel is its Strehl ratio; the long exposure comes first."""
+    workdir, _ = finished_run
+    gallery = xr.open_dataset(workdir / "figures" / "psf.nc")
+    assert list(gallery.case.values) == ["good", "ltao"]
+    assert list(gallery.panel.values) == ["long exposure", "image Strehl, 100 %", "image Strehl, 10 %"]
+    brightest = gallery.image.max(("y", "x")).values
+    np.testing.assert_allclose(brightest, gallery.strehl.values, rtol=1e-5)
+    ltao = xr.open_dataset(workdir / "results" / "cases" / "ltao" / "lucky.nc")
+    assert float(gallery.strehl.sel(case="ltao", panel="image Strehl, 10 %")) == float(
+        ltao.strehl.sel(criterion="strehl", fraction=0.1, detector="noiseless").isel(target=0))
+
+
+def test_the_python_api_opens_results_and_reruns_a_case_to_the_same_numbers(finished_run, tmp_path):
+    """``luckyao.open_case`` / ``open_figure`` give the study's files; ``run_case`` on the
+    tiny study's config runs a case without Snakemake to the workflow's very numbers."""
+    import luckyao
+
+    workdir, config = finished_run
+    lucky = luckyao.open_case("good", workdir)
+    assert lucky.identical(xr.load_dataset(workdir / "results" / "cases" / "good" / "lucky.nc"))
+    figure = luckyao.open_figure("quality", workdir)
+    assert figure.identical(xr.load_dataset(workdir / "figures" / "quality.nc"))
+    assert len(luckyao.draw(figure).axes) == 3
+    rerun = luckyao.run_case(luckyao.load_study(config), "good", workdir=tmp_path)
+    for name in ("strehl", "d50_arcsec", "strehl_error", "image", "long_exposure_strehl", "frame_strehl"):
+        np.testing.assert_array_equal(rerun[name].values, lucky[name].values, err_msg=name)
+    with pytest.raises(FileNotFoundError, match="nope"):
+        luckyao.open_case("nope", workdir)
+
+
+def test_the_report_has_short_captions_and_no_settings_json(finished_run):
+    """Each caption says what the figure shows, its cases in short and its short config
+    hash; no figure job carries the settings JSON (formerly 5-28k characters a caption)."""
+    workdir, _ = finished_run
+    result = snakemake(workdir, "--report", str(workdir / "report.html"))
+    assert result.returncode == 0, result.stderr[-3000:]
+    html = (workdir / "report.html").read_text()
+    assert "case_configs" not in html and 'settings={' not in html
+    assert "Integrated-image quality vs a swept parameter" in html
+    assert "no AO, r0 20 cm" in html  # the case good, in short

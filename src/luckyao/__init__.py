@@ -1,8 +1,26 @@
-"""luckyao: LGS-assisted lucky imaging, simulated and validated against theory."""
+"""luckyao: LGS-assisted lucky imaging, simulated and validated against theory.
 
+The Python interface (``luckyao.api``, loaded on first use): ``open_case``,
+``open_telemetry``, ``open_figure``, ``draw``, ``load_study``, ``run_case``,
+``export_fits``; a walk-through in ``docs/tutorial.py``.
+"""
+
+import importlib
 from importlib.metadata import PackageNotFoundError, version
 
 try:
     __version__ = version("luckyao")
 except PackageNotFoundError:  # running from a source tree without installation
     __version__ = "0+unknown"
+
+_API = ("open_case", "open_telemetry", "open_figure", "draw", "load_study", "run_case", "export_fits")
+__all__ = ["__version__", *_API]
+
+
+def __getattr__(name: str):
+    # Loaded on first use, by name: every workflow step imports this package, and neither
+    # its start-up nor its code inputs (study/code_deps.py follows import statements)
+    # should include the interface, which no step uses.
+    if name in _API:
+        return getattr(importlib.import_module("luckyao.api"), name)
+    raise AttributeError(f"module 'luckyao' has no attribute {name!r}")

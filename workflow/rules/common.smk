@@ -9,23 +9,31 @@ from luckyao.study.resources import (commands_memory_bytes, lucky_memory_bytes, 
                                      preflight, reconstructor_memory_bytes, simulate_memory_bytes,
                                      turbulence_memory_bytes)
 from luckyao.study.config import (ConfigError, calibration_key, calibration_spec, canonical_json, commands_key,
-                                  commands_spec, imaged_targets,
-                                  lucky_settings, reconstructor_key, reconstructor_spec, sweep_detectors,
-                                  turbulence_key, turbulence_spec, validate_study)
+                                  commands_spec, imaged_targets, lucky_settings, plausibility_warnings,
+                                  reconstructor_key, reconstructor_spec, sweep_detectors, turbulence_key,
+                                  turbulence_spec, unused_cases, validate_study)
+from luckyao.study.sweeps import expand_sweeps, sweep_points
 
 RUN_LOCK = hold_shared()  # this study folder is in use until this Snakemake exits (run.sh cleans up only when free)
 
 try:
-    CASES = validate_study(config)
+    STUDY = expand_sweeps(config)  # a sweep's grid points become cases
+    CASES = validate_study(STUDY)
 except ConfigError as err:
     sys.exit("\n".join(f"luckyao: invalid study config: {problem}" for problem in str(err).splitlines()))
-STUDY = config
 # Before any job: every job's memory within this machine's (or --resources mem_mb=N, e.g. a
 # cluster's nodes), every file it writes within the free disk (src/luckyao/study/resources.py).
 GIVEN_MEM_MB = getattr(workflow.global_resources.get("mem_mb"), "value", None)  # a snakemake Resource
 MEMORY_LIMIT_BYTES = max(machine_memory_bytes(), 1e6 * GIVEN_MEM_MB if isinstance(GIVEN_MEM_MB, (int, float)) else 0)
 if problems := preflight(STUDY, CASES, memory_bytes=MEMORY_LIMIT_BYTES):
     sys.exit("\n".join(f"luckyao: study too large: {problem}" for problem in problems))
+for warning in plausibility_warnings(CASES):
+    print(f"luckyao: warning: {warning}", file=sys.stderr)
+if unused_cases(STUDY):
+    # warned, not run: a case no figure shows would cost its simulation (minutes to an hour at
+    # paper fidelity) for nothing drawn; `snakemake all_cases` runs every case on purpose
+    print(f"luckyao: warning: no figure shows the cases {', '.join(unused_cases(STUDY))}: they are not run "
+          "(`all_cases` runs every case)", file=sys.stderr)
 
 TURBULENCE = {name: turbulence_spec(STUDY, case) for name, case in CASES.items()}
 TURBULENCE_BY_KEY = {turbulence_key(spec): spec for spec in TURBULENCE.values()}
@@ -57,6 +65,16 @@ def calibration_file(case):
     return f"results/calibrations/{calibration_key(spec)}.nc" if spec else []
 
 
+def write_text_atomic(path, text):
+    """Write ``text`` to ``path`` through a temporary file in the same folder."""
+    import os
+
+    os.makedirs(os.path.dirname(path), exist_ok=True)
+    with open(f"{path}.partial", "w") as f:
+        f.write(text)
+    os.replace(f"{path}.partial", path)
+
+
 def frames_output(path):
     return path if STUDY.get("keep_frames", False) else temp(path)
 
@@ -71,10 +89,15 @@ wildcard_constraints:
 
 
 def figure_settings(fig):
-    """The figure's config, its cases' resolved configs, the seed, and the detector sweep."""
+    """The figure's config, its cases' resolved configs, the seed, and what some kinds need
+    besides: the detector sweep's detectors, a sweep's grid points."""
     figure = STUDY["figures"][fig]
-    sweep = {"sweep_detectors": sweep_detectors(STUDY["lucky"])} if figure["kind"] == "quality_vs_signal" else {}
-    return {**figure, "seed": STUDY["seed"], "case_configs": {c: CASES[c] for c in figure["cases"]}, **sweep}
+    extra = {}
+    if figure["kind"] == "quality_vs_signal":
+        extra["sweep_detectors"] = sweep_detectors(STUDY["lucky"])
+    if "sweep" in figure:
+        extra["sweep_points"] = [[p.case, p.values] for p in sweep_points(STUDY, figure["sweep"])]
+    return {**figure, "seed": STUDY["seed"], "case_configs": {c: CASES[c] for c in figure["cases"]}, **extra}
 
 
 def figure_inputs(fig):
@@ -85,6 +108,23 @@ def figure_inputs(fig):
     return [f"results/cases/{c}/lucky.nc" for c in figure["cases"]]
 
 
+DRAWN_CASES = sorted({c for fig in STUDY["figures"] for c in STUDY["figures"][fig]["cases"]
+                      if STUDY["figures"][fig]["kind"] != "asterism"})
+"""The cases whose results a figure reads: `all` runs them and exports their images as FITS."""
+
+
+def figure_caption_rst(fig):
+    """The report caption of a figure (config text escaped: no markup from names)."""
+    from luckyao.study.report import figure_caption
+
+    return figure_caption(fig, STUDY["figures"][fig], STUDY, CASES)
+
+
+def short_code_version(version):
+    """``0.1.0 git <40 hex> +dirty`` as ``0.1.0 git <12 hex> +dirty``."""
+    return " ".join(word[:12] if len(word) == 40 else word for word in version.split())
+
+
 def figure_report_labels(fig, data):
     """The report's labels of a figure: what it is, and the provenance its dataset carries."""
     import xarray as xr
@@ -92,12 +132,13 @@ def figure_report_labels(fig, data):
     with xr.open_dataset(data) as ds:
         attrs = dict(ds.attrs)
     figure = STUDY["figures"][fig]
+    cases = figure["cases"]
     return {
         "figure": fig,
         "kind": figure["kind"],
-        "cases": ", ".join(figure["cases"]),
-        "config sha256": str(attrs.get("config_sha256", "?")),
-        "code version": str(attrs.get("code_version", "?")),
+        "cases": ", ".join(cases) if len(cases) <= 3 else f"{len(cases)}: {', '.join(cases[:2])}, ...",
+        "config": str(attrs.get("config_sha256", "?"))[:12],
+        "code version": short_code_version(str(attrs.get("code_version", "?"))),
     }
 
 

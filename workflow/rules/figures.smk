@@ -1,20 +1,39 @@
+# Figures and FITS images are short jobs: on a cluster they run beside Snakemake itself
+# instead of each queueing through sbatch.
+localrules: figure_settings, figure, export, all_cases
+
+
+rule figure_settings:
+    """A figure's settings (its config, its cases' resolved configs, the seed) as a file, so
+    that they reach the figure job without being a (report-visible, very long) parameter;
+    rewritten, and the figure redrawn, exactly when they change."""
+    output:
+        "results/figures/{fig}.settings.json",
+    params:
+        settings=lambda w: canonical_json(figure_settings(w.fig)),
+    run:
+        write_text_atomic(output[0], params.settings)
+
+
 rule figure:
     """One figure and the tidy dataset it is drawn from."""
     input:
+        settings="results/figures/{fig}.settings.json",
         lucky=lambda w: figure_inputs(w.fig),
         code=step_sources("figures"),
     output:
         pdf="figures/{fig}.pdf",
-        png=report(
-            "figures/{fig}.png",
+        png="figures/{fig}.png",
+        page=report(  # the PNG in a page: the report opens it at the window's width
+            "figures/{fig}.html",
             caption="../report/figure.rst",
             category="Figures",
             labels=lambda w, output: figure_report_labels(w.fig, output.data),
         ),
         data="figures/{fig}.nc",
     params:
-        settings=lambda w: canonical_json(figure_settings(w.fig)),
         prefix=lambda w: f"figures/{w.fig}",
+        caption=lambda w: figure_caption_rst(w.fig),  # short, escaped: the report's caption
     threads: 1
     resources:
         mem_mb=1500,  # at most 1 GB measured
@@ -22,6 +41,28 @@ rule figure:
     log:
         "logs/figures/{fig}.log",
     shell:
-        "{LUCKYAO} figure --id {wildcards.fig:q} --settings {params.settings:q}"
+        "{LUCKYAO} figure --id {wildcards.fig:q} --settings-file {input.settings:q}"
         " --out-prefix {params.prefix:q} {input.lucky:q} 2> {log:q}"
 
+
+rule export:
+    """A case's integrated and long-exposure images as FITS (one image extension each)."""
+    input:
+        lucky="results/cases/{case}/lucky.nc",
+        code=step_sources("export"),
+    output:
+        "fits/{case}.fits",
+    threads: 1
+    resources:
+        mem_mb=1000,
+        runtime=5,
+    log:
+        "logs/export/{case}.log",
+    shell:
+        "{LUCKYAO} export {input.lucky:q} --out {output:q} 2> {log:q}"
+
+
+rule all_cases:
+    """Every case of the study, those no figure shows too, with its FITS images."""
+    input:
+        expand("fits/{case}.fits", case=list(CASES)),

@@ -521,8 +521,9 @@ def run_lucky(iter_chunks: Callable[[], Iterable[tuple[int, np.ndarray]]], n_fra
     detector); per-frame ``frame_strehl``, ``frame_d50_arcsec``,
     ``frame_centroid_px`` (detector, frame[, axis]) and ``frame_criterion``
     (criterion, detector, frame); unless ``image_crop_px`` is 0, the central
-    ``image_crop_px`` square (None: whole frame) of the integrated images normalised
-    to unit flux, ``image`` (criterion, fraction, detector, y, x) and
+    ``image_crop_px`` square (None: whole frame) of the integrated images over the
+    whole frame's flux (the crop sums to the fraction of the flux it holds),
+    ``image`` (criterion, fraction, detector, y, x) and
     ``long_exposure_image`` (recentring, detector, y, x); with blocks, ``strehl_block``,
     ``fwhm_arcsec_block``, ``d50_arcsec_block`` (block, criterion, fraction, detector)
     and the errors ``strehl_error``, ``fwhm_arcsec_error``, ``d50_arcsec_error``.
@@ -760,11 +761,12 @@ def run_lucky(iter_chunks: Callable[[], Iterable[tuple[int, np.ndarray]]], n_fra
         ds = ds.assign_coords(
             y=("y", offsets, _attrs("pixel", "row offset from the optical axis pixel (n/2)")),
             x=("x", offsets, _attrs("pixel", "column offset from the optical axis pixel (n/2)")))
-        ds["image"] = (("criterion", "fraction", "detector", "y", "x"), unit.astype(np.float32),
-                       _attrs("1", "integrated image normalised to unit flux"))
-        ds["long_exposure_image"] = (("recentring", "detector", "y", "x"),
-                                     unit_long.astype(np.float32),
-                                     _attrs("1", "long exposure (all frames), unit flux"))
+        held = f"the central {m} x {m} pixels of the whole frame" if m < n else "the whole frame"
+        ds["image"] = (("criterion", "fraction", "detector", "y", "x"), unit.astype(np.float32), _attrs(
+            "1", f"integrated image over the whole frame's flux: {held} (their sum is the fraction of the flux "
+                 "they hold)"))
+        ds["long_exposure_image"] = (("recentring", "detector", "y", "x"), unit_long.astype(np.float32), _attrs(
+            "1", f"long exposure (all frames) over the whole frame's flux: {held}"))
     ds.attrs.update(pixel_scale_arcsec=pixel_scale_arcsec,
                     diffraction_limited_peak=diffraction_limited_peak, seed=seed,
                     n_pixels=n)

@@ -8,7 +8,8 @@
     luckyao calibration --spec JSON --out W.nc
     luckyao commands --spec JSON --out C.nc
     luckyao lucky --settings JSON --frames F --telemetry T --out lucky.nc [--screens S.npy --screens-metadata S.nc]
-    luckyao figure --id ID --settings JSON --out-prefix figures/ID  lucky.nc ...
+    luckyao figure --id ID (--settings JSON | --settings-file S.json) --out-prefix figures/ID  lucky.nc ...
+    luckyao export lucky.nc --out images.fits [--detector NAME ...]
     luckyao table figures/longexp.nc
     luckyao archive [--study-dir DIR] [--configfile OVERLAY ...] [--out A.tar]
     luckyao verify A.tar [--case NAME | --all-cases] [--workdir DIR] [--rtol R] [--atol A] [--no-rerun]
@@ -18,6 +19,7 @@
 import argparse
 import json
 import logging
+import os
 import signal
 import sys
 import time
@@ -30,14 +32,21 @@ def _setup_logging() -> None:
 
 def cmd_check(args) -> int:
     """One line: valid, or one line per problem naming its key (no traceback)."""
-    from .config import ConfigError, load_study
+    from .config import ConfigError, load_study, plausibility_warnings, unused_cases
 
     try:
-        _, cases = load_study(*args.config)
+        study, cases = load_study(*args.config)
     except ConfigError as err:
         for problem in str(err).splitlines():
             print(f"{' + '.join(args.config)}: {problem}", file=sys.stderr)
         return 1
+    for warning in plausibility_warnings(cases):
+        print(f"{' + '.join(args.config)}: warning: {warning}", file=sys.stderr)
+    from .sweeps import expand_sweeps
+
+    unused = unused_cases(expand_sweeps(study))
+    if unused:
+        print(f"{' + '.join(args.config)}: warning: no figure shows the cases {', '.join(unused)}", file=sys.stderr)
     print(f"{' + '.join(args.config)}: valid, {len(cases)} cases")
     return 0
 
@@ -126,14 +135,30 @@ def cmd_lucky(args) -> None:
 def cmd_figure(args) -> None:
     from .figures import draw_figure
 
-    draw_figure(args.id, json.loads(args.settings), args.inputs, args.out_prefix)
+    if args.settings_file:
+        with open(args.settings_file) as f:
+            settings = json.load(f)
+    else:
+        settings = json.loads(args.settings)
+    draw_figure(args.id, settings, args.inputs, args.out_prefix)
+
+
+def cmd_export(args) -> None:
+    from .export import export_fits
+
+    n = export_fits(args.lucky, args.out, args.detector)
+    logging.getLogger(__name__).info("wrote %s: %d images", args.out, n)
 
 
 def cmd_table(args) -> None:
     from .datasets import open_dataset
     from .figures import long_exposure_markdown
 
-    sys.stdout.write(long_exposure_markdown(open_dataset(args.data, "long_exposure_table figure data", remake=False)))
+    data = open_dataset(args.data, "long_exposure_table figure data", remake=False)
+    if "best_lucky_strehl" not in data:
+        raise ValueError(f"'{args.data}' is not a long_exposure_table figure's data (it has no best_lucky_strehl); "
+                         "give one such as figures/longexp.nc")
+    sys.stdout.write(long_exposure_markdown(data))
 
 
 def cmd_archive(args) -> int:
@@ -174,6 +199,23 @@ def cmd_lock(args) -> None:
 
 
 def main(argv=None) -> int:
+    """Run one subcommand; a failure is one line naming the file or key (no traceback;
+    ``LUCKYAO_TRACEBACK=1`` shows it)."""
+    args = build_parser().parse_args(argv)
+    _setup_logging()
+    signal.signal(signal.SIGXFSZ, signal.SIG_IGN)  # a file over the size limit: a named write error, not a kill
+    try:
+        return args.func(args) or 0
+    except (ValueError, OSError, KeyError, RuntimeError) as err:
+        if os.environ.get("LUCKYAO_TRACEBACK"):
+            raise
+        message = f"missing {err}" if isinstance(err, KeyError) else str(err)
+        detail = f" ({type(err).__name__})" if isinstance(err, (OSError, KeyError)) else ""
+        print(f"luckyao {args.command}: error{detail}: {message}", file=sys.stderr)
+        return 1
+
+
+def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="luckyao", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = parser.add_subparsers(dest="command", required=True)
@@ -228,10 +270,18 @@ def main(argv=None) -> int:
 
     p = sub.add_parser("figure", help="draw one figure and write its data")
     p.add_argument("--id", required=True)
-    p.add_argument("--settings", required=True, help="figure settings as JSON")
+    given = p.add_mutually_exclusive_group(required=True)
+    given.add_argument("--settings", help="figure settings as JSON")
+    given.add_argument("--settings-file", help="figure settings as a JSON file")
     p.add_argument("--out-prefix", required=True)
     p.add_argument("inputs", nargs="*", help="lucky.nc files of the figure's cases, in order")
     p.set_defaults(func=cmd_figure)
+
+    p = sub.add_parser("export", help="a case's integrated and long-exposure images as FITS")
+    p.add_argument("lucky", help="the case's lucky.nc")
+    p.add_argument("--out", required=True, help="FITS file to write")
+    p.add_argument("--detector", nargs="+", help="only these detectors (default: all)")
+    p.set_defaults(func=cmd_export)
 
     p = sub.add_parser("table", help="a long_exposure_table figure's data as a Markdown table")
     p.add_argument("data", help="the figure's .nc, e.g. figures/longexp.nc")
@@ -259,14 +309,7 @@ def main(argv=None) -> int:
     p.add_argument("--out", help="file to write, e.g. requirements.lock")
     p.set_defaults(func=cmd_lock)
 
-    args = parser.parse_args(argv)
-    _setup_logging()
-    signal.signal(signal.SIGXFSZ, signal.SIG_IGN)  # a file over the size limit: a named write error, not a kill
-    try:
-        return args.func(args) or 0
-    except (ValueError, OSError) as err:
-        logging.getLogger("luckyao").exception("%s", err)
-        return 1
+    return parser
 
 
 if __name__ == "__main__":

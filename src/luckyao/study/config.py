@@ -67,6 +67,12 @@ def _validate(instance, schema: dict, prefix: str) -> None:
         raise ConfigError("\n".join(f"config key '{_key_path(prefix, e)}': {_message(e)}" for e in errors))
 
 
+def validate_block(config: dict, key: str, schema: dict) -> None:
+    """Check one top-level block of a study config against its part of the schema."""
+    if key in config:
+        _validate(config[key], dict(schema["properties"][key], definitions=schema["definitions"]), key)
+
+
 def _check_finite(value, where: str) -> None:
     """Reject NaN and infinities anywhere (YAML's ``.nan``, ``.inf`` are numbers to JSON schema)."""
     if isinstance(value, dict):
@@ -133,8 +139,11 @@ def validate_study(config: dict, schema: dict | None = None) -> dict:
     schema violation of the study, then the first problem of each case and of each
     figure.
     """
+    from .sweeps import expand_sweeps
+
     schema = schema or load_schema()
     _check_finite(config, "")
+    config = expand_sweeps(config)
     _validate(config, schema, "")
     case_schema = dict(schema["definitions"]["case"], definitions=schema["definitions"])
     cases, problems = {}, []
@@ -166,8 +175,14 @@ def _check_figure(fig_id: str, figure: dict, cases: dict, config: dict) -> None:
     for case in figure["cases"]:
         if case not in config["cases"]:
             raise ConfigError(f"config key 'figures.{fig_id}.cases': unknown case '{case}'")
-    if figure["kind"] in ("quality_vs_fraction", "quality_vs_distance") and "criteria" not in figure:
-        raise ConfigError(f"config key 'figures.{fig_id}.criteria': required for {figure['kind']}")
+    needs = {"quality_vs_fraction": ("criteria",), "quality_vs_distance": ("criteria", "fractions"),
+             "quality_vs_parameter": ("sweep", "criteria", "fractions"), "psf_gallery": ("criteria", "fractions")}
+    for key in needs.get(figure["kind"], ()):
+        if key not in figure:
+            raise ConfigError(f"config key 'figures.{fig_id}.{key}': required for {figure['kind']}")
+    if "parameter" in figure and figure["parameter"] not in config["sweeps"][figure["sweep"]]["parameters"]:
+        raise ConfigError(f"config key 'figures.{fig_id}.parameter': '{figure['parameter']}' is not a parameter "
+                          f"of sweep '{figure['sweep']}'")
     if figure["kind"] == "comparisons":
         if "pairs" not in figure:
             raise ConfigError(f"config key 'figures.{fig_id}.pairs': required for comparisons")
@@ -181,8 +196,6 @@ def _check_figure(fig_id: str, figure: dict, cases: dict, config: dict) -> None:
                     raise ConfigError(f"config key 'figures.{fig_id}.pairs[{i}].{side}.criterion': case '{case}' "
                                       f"cannot give {criterion}")
     if figure["kind"] == "quality_vs_distance":
-        if "fractions" not in figure:
-            raise ConfigError(f"config key 'figures.{fig_id}.fractions': required for quality_vs_distance")
         for case in figure["cases"]:
             if case in cases and len(cases[case]["targets_arcsec"]) < 2:
                 raise ConfigError(f"config key 'figures.{fig_id}.cases': case '{case}' has one target; "
@@ -217,6 +230,44 @@ def _check_figure(fig_id: str, figure: dict, cases: dict, config: dict) -> None:
         raise ConfigError(f"config key 'figures.{fig_id}.fractions': {sorted(missing)} not in lucky.fractions")
 
 
+PLAUSIBLE_RANGES = (
+    ("atmosphere.r0_500nm_m", 0.02, 2.0, "m", "a Fried parameter at 500 nm (10 cm is 0.10)"),
+    ("atmosphere.outer_scale_m", 1.0, 1000.0, "m", "an outer scale"),
+    ("camera.wavelength_m", 3e-7, 3e-6, "m", "a science wavelength (0.3-3 um)"),
+    ("lgs.wavelength_m", 3e-7, 3e-6, "m", "a laser wavelength (0.3-3 um)"),
+    ("lgs.height_m", 5e3, 200e3, "m", "a beacon height"),
+    ("telescope.diameter_m", 0.1, 100.0, "m", "a telescope diameter"),
+    ("duration_s", 0.0, 3600.0, "s", "telescope time per case"),
+    ("camera.frame_time_s", 1e-4, 1.0, "s", "a lucky frame's exposure"),
+)
+"""(key path of a case, lowest and highest plausible value, unit, what it is): values
+outside are allowed but warned about (a unit slip, e.g. r0 in cm written as metres)."""
+
+
+def plausibility_warnings(cases: dict) -> list[str]:
+    """One line per value of a resolved case outside :data:`PLAUSIBLE_RANGES` or a wind
+    speed above 100 m/s, naming the key; the config stays valid."""
+    lines = []
+    for name, case in cases.items():
+        for path, low, high, unit, what in PLAUSIBLE_RANGES:
+            value = case
+            for part in path.split("."):
+                value = value[part]
+            if not low <= value <= high:
+                lines.append(f"config key 'cases.{name}.{path}': {value:g} {unit} is outside {low:g}-{high:g} "
+                             f"{unit}, implausible for {what}; is the unit right?")
+        fastest = max(case["atmosphere"]["wind_speed_m_s"])
+        if fastest > 100:
+            lines.append(f"config key 'cases.{name}.atmosphere.wind_speed_m_s': {fastest:g} m/s is above 100 m/s")
+    return lines
+
+
+def unused_cases(config: dict) -> list[str]:
+    """Cases that no figure lists (``all`` does not run them; ``all_cases`` does)."""
+    shown = {case for figure in config["figures"].values() for case in figure["cases"]}
+    return [name for name in config["cases"] if name not in shown]
+
+
 def frame_count(case: dict) -> int:
     """Whole lucky frames in a resolved case's duration."""
     return int(np.floor(case["duration_s"] / case["camera"]["frame_time_s"] + 1e-9))
@@ -245,7 +296,7 @@ def criteria_of(case: dict) -> set[str]:
 def load_study(*paths) -> tuple[dict, dict]:
     """Read study YAML files, each deep-merged over the one before (as Snakemake's
     ``configfile:`` and ``--configfile`` do), and validate the result; returns
-    (config, resolved cases)."""
+    (config as written, resolved cases: the sweeps' among them)."""
     config = {}
     for path in paths:
         try:
@@ -325,6 +376,17 @@ def calibration_spec(study: dict, case: dict) -> dict | None:
 
 def calibration_key(spec: dict) -> str:
     return "calibration_" + sha256(spec)[:12]
+
+
+def figure_default(key: str):
+    """The schema's default of a figure key (``detector``: ``noiseless``)."""
+    return load_schema()["properties"]["figures"]["additionalProperties"]["properties"][key]["default"]
+
+
+def image_crop_px(lucky: dict) -> int | None:
+    """Pixels across the images ``lucky.nc`` keeps: ``lucky.image_crop_px``, by default the
+    schema's (64); None: the whole frame."""
+    return lucky.get("image_crop_px", load_schema()["properties"]["lucky"]["properties"]["image_crop_px"]["default"])
 
 
 def error_blocks(lucky: dict) -> int:

@@ -15,7 +15,7 @@ import xarray as xr
 from ..lucky.detector import Detector
 from ..lucky.selection import ExternalCriterion, ImageReference, run_lucky
 from .case import Case
-from .config import canonical_json, imaged_targets
+from .config import canonical_json, image_crop_px, imaged_targets
 from .datasets import iter_frame_blocks, open_dataset, provenance, require_finite, write_dataset
 from .simulation import replay_frames
 from .turbulence import read_screens
@@ -90,7 +90,8 @@ def lucky_case(settings: dict, frames_path, telemetry_path, out_path, screens_pa
         per_target[target] = run_lucky(
             frames, n_frames, detectors, settings["fractions"],
             float(telemetry.attrs["diffraction_limited_peak"]), pixel_scale, settings["seed"] + target,
-            criteria_external=external, reference=image_reference, n_blocks=n_blocks)
+            criteria_external=external, reference=image_reference, n_blocks=n_blocks,
+            image_crop_px=image_crop_px(settings))
     ds = xr.concat([per_target[t] for t in range(n_targets)], dim="target", data_vars="all", coords="minimal",
                    compat="override")
     ds["reference_target"] = ((), -1 if reference is None else reference, {

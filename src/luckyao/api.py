@@ -1,0 +1,150 @@
+"""The Python interface: open a study's results as xarray datasets, redraw a figure,
+and run one case from a config dict without Snakemake (for exploration).
+
+    import luckyao
+    lucky = luckyao.open_case("ltao_r0_13.5cm")            # results/cases/<case>/lucky.nc
+    data = luckyao.open_figure("r0")                         # figures/r0.nc, the figure's tidy data
+    fig = luckyao.draw(data)                                 # the figure again, as a matplotlib Figure
+    study = luckyao.load_study("config/config.yaml")
+    mine = luckyao.run_case(study, {"atmosphere": {"r0_500nm_m": 0.10}})   # an override of base
+
+``run_case`` runs the workflow's own steps (screens, reconstructor, AO commands, time
+loop, post-processing) as the workflow runs them, without Snakemake, so its numbers are
+the workflow's for the same config and seed. A walk-through: ``docs/tutorial.py``.
+"""
+
+import copy
+import json
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+import xarray as xr
+
+from .study.config import ConfigError, load_study as _load_study, validate_study
+
+__all__ = ["open_case", "open_telemetry", "open_figure", "draw", "load_study", "run_case", "export_fits"]
+
+
+def load_study(*paths) -> dict:
+    """A study config from YAML files (later ones merged over earlier ones, sweeps
+    expanded), validated; raises ``ConfigError`` naming the key."""
+    from .study.sweeps import expand_sweeps
+
+    study, _ = _load_study(*paths)
+    return expand_sweeps(study)
+
+
+def _open(path: Path, what: str) -> xr.Dataset:
+    from .study.datasets import open_dataset
+
+    return open_dataset(path, what)
+
+
+def open_case(case: str, study_dir=".") -> xr.Dataset:
+    """A finished case's lucky-imaging results (``results/cases/<case>/lucky.nc``):
+    integrated-image Strehl, FWHM, d50 per criterion, fraction, detector and target,
+    with errors, images and per-frame values."""
+    return _open(Path(study_dir) / "results" / "cases" / case / "lucky.nc", f"case {case!r} lucky")
+
+
+def open_telemetry(case: str, study_dir=".") -> xr.Dataset:
+    """A finished case's per-frame telemetry (``results/cases/<case>/telemetry.nc``)."""
+    return _open(Path(study_dir) / "results" / "cases" / case / "telemetry.nc", f"case {case!r} telemetry")
+
+
+def open_figure(fig_id: str, study_dir=".") -> xr.Dataset:
+    """A drawn figure's tidy dataset (``figures/<id>.nc``); its settings are in
+    ``attrs['config_json']``."""
+    return _open(Path(study_dir) / "figures" / f"{fig_id}.nc", f"figure {fig_id!r}")
+
+
+def draw(data: xr.Dataset, title: str | None = None):
+    """The matplotlib Figure of a figure's dataset (:func:`open_figure`), drawn as the
+    workflow draws it."""
+    from .study.figures import FIGURE_KINDS
+
+    settings = json.loads(data.attrs["config_json"])
+    return FIGURE_KINDS[settings["kind"]][1](data, title or str(data.attrs.get("title", "")).split()[-1])
+
+
+def export_fits(lucky_path, out_path, detectors=None) -> int:
+    """A case's images as FITS (see ``luckyao export``); returns the number of images."""
+    from .study.export import export_fits as export
+
+    return export(lucky_path, out_path, detectors)
+
+
+ONE_THREAD = {name: "1" for name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS",
+                                      "NUMBA_NUM_THREADS")}
+"""The numerical libraries pinned to one thread, as the workflow runs every step
+(``workflow/rules/common.smk``): the same rounding, so the same numbers."""
+
+
+def _step(*argv: str) -> None:
+    """One workflow step, run as the workflow runs it: ``python -m luckyao <step> ...``
+    with the libraries on one thread; a failure raises with the step's own message."""
+    done = subprocess.run([sys.executable, "-m", "luckyao", *argv], env={**os.environ, **ONE_THREAD},
+                          capture_output=True, text=True)
+    if done.returncode:
+        last = (done.stderr.strip().splitlines() or ["no message"])[-1]
+        raise RuntimeError(f"luckyao {argv[0]} failed: {last}")
+
+
+def run_case(study: dict, case, name: str = "explore", workdir=None) -> xr.Dataset:
+    """Run one case of ``study`` (a study config as :func:`load_study` gives) and return its
+    lucky-imaging results (as :func:`open_case`). ``case`` is the name of one of the
+    study's cases, or a dict of overrides of its ``base`` (then called ``name``). The files
+    go to ``workdir`` (kept), by default to a temporary folder removed afterwards. Keep
+    ``turbulence.duration_s`` short for exploration: the screens are made for all of it."""
+    from .study.config import (canonical_json, commands_key, commands_spec, lucky_settings, reconstructor_key,
+                               reconstructor_spec, turbulence_key, turbulence_spec)
+
+    study = copy.deepcopy(study)
+    if isinstance(case, dict):
+        if name in study.get("cases", {}):
+            raise ConfigError(f"run_case: the study already has a case named {name!r}; pass another name")
+        study.setdefault("cases", {})[name] = case
+    elif case in study.get("cases", {}):
+        name = case
+    else:
+        raise ConfigError(f"run_case: no case {case!r} in the study; give its name or a dict of overrides of base")
+    # the case alone, with the figures that change its post-processing (the detector sweep)
+    signal = {f: dict(v, cases=[name]) for f, v in study.get("figures", {}).items()
+              if v["kind"] == "quality_vs_signal" and name in v.get("cases", [])}
+    study = {**{k: v for k, v in study.items() if k != "sweeps"}, "cases": {name: study["cases"][name]},
+             "figures": signal}
+    cases = validate_study(study)
+    resolved = cases[name]
+    scratch = workdir is None
+    root = Path(tempfile.mkdtemp(prefix="luckyao-") if scratch else workdir)
+    root.mkdir(parents=True, exist_ok=True)
+    try:
+        turbulence = turbulence_spec(study, resolved)
+        screens = root / f"{turbulence_key(turbulence)}.npy"
+        metadata = screens.with_suffix(".nc")
+        if not metadata.exists():
+            _step("turbulence", "--spec", canonical_json(turbulence), "--screens", str(screens),
+                  "--metadata", str(metadata))
+        products = []
+        for spec, key, step in ((reconstructor_spec(resolved), reconstructor_key, "reconstructor"),
+                                (commands_spec(resolved), commands_key, "commands")):
+            path = root / f"{key(spec)}.nc" if spec is not None else None
+            if path is not None and not path.exists():
+                _step(step, "--spec", canonical_json(spec), "--out", str(path))
+            products += [f"--{step}", str(path) if path else ""]
+        frames, telemetry, lucky = (root / name / f for f in ("frames.nc", "telemetry.nc", "lucky.nc"))
+        frames.parent.mkdir(exist_ok=True)
+        _step("simulate", "--case", canonical_json(resolved), "--name", name, "--seed", str(study["seed"]),
+              "--screens", str(screens), "--screens-metadata", str(metadata), *products,
+              "--frames", str(frames), "--telemetry", str(telemetry))
+        _step("lucky", "--settings", canonical_json(lucky_settings(study, cases, name)), "--frames", str(frames),
+              "--telemetry", str(telemetry), "--out", str(lucky), "--screens", str(screens),
+              "--screens-metadata", str(metadata))
+        return _open(lucky, "lucky")
+    finally:
+        if scratch:
+            shutil.rmtree(root, ignore_errors=True)

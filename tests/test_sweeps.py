@@ -1,0 +1,114 @@
+"""Sweeps expand a grid of config values into named cases (reusing equal cases), and
+configs with implausible values are warned about by key."""
+
+import copy
+from pathlib import Path
+
+import pytest
+import yaml
+
+from luckyao.study.config import ConfigError, plausibility_warnings, unused_cases, validate_study
+from luckyao.study.sweeps import CASE_NAME, expand_sweeps, sweep_points
+
+TINY = Path(__file__).resolve().parent / "data" / "tiny.yaml"
+
+
+def tiny() -> dict:
+    return yaml.safe_load(TINY.read_text())
+
+
+def with_sweep(parameters: dict, overrides=None) -> dict:
+    study = tiny()
+    study["sweeps"]["grid"] = {"parameters": parameters, **({"overrides": overrides} if overrides else {})}
+    study["figures"]["grid"] = {"kind": "quality_vs_parameter", "sweep": "grid", "criteria": ["strehl"],
+                                "fractions": [1.0]}
+    return study
+
+
+def test_a_grid_is_every_combination_named_by_its_values_with_its_values_applied():
+    study = with_sweep({"atmosphere.r0_500nm_m": [0.1, 0.3], "camera.wavelength_m": [8e-7, 1.6e-6]},
+                       overrides={"wfs": {"n_subapertures": 4}})
+    cases = validate_study(study)
+    points = sweep_points(study, "grid")
+    names = [p.case for p in points]
+    assert names == ["grid_r0_500nm_m-0.1_wavelength_m-8e-07", "grid_r0_500nm_m-0.1_wavelength_m-1.6e-06",
+                     "grid_r0_500nm_m-0.3_wavelength_m-8e-07", "grid_r0_500nm_m-0.3_wavelength_m-1.6e-06"]
+    for point in points:
+        case = cases[point.case]
+        assert case["atmosphere"]["r0_500nm_m"] == point.values["atmosphere.r0_500nm_m"]
+        assert case["camera"]["wavelength_m"] == point.values["camera.wavelength_m"]
+        assert case["wfs"]["n_subapertures"] == 4  # the sweep's overrides
+        assert CASE_NAME.match(point.case) and ".." not in point.case
+    assert expand_sweeps(study)["figures"]["grid"]["cases"] == names
+
+
+def test_a_point_equal_to_an_existing_case_is_that_case():
+    """r0 = 0.2 m and 0.1 m over base are the tiny study's cases good and bad: not run twice."""
+    study = with_sweep({"atmosphere.r0_500nm_m": [0.2, 0.1, 0.25]})
+    names = [p.case for p in sweep_points(study, "grid")]
+    assert names == ["good", "bad", "grid_r0_500nm_m-0.25"]
+    assert set(validate_study(study)) == set(validate_study(tiny())) | {"grid_r0_500nm_m-0.25"}
+
+
+def test_adding_values_keeps_the_other_points_names_and_configs():
+    before = validate_study(with_sweep({"atmosphere.r0_500nm_m": [0.12, 0.25], "ao.mode": ["none"]}))
+    after = validate_study(with_sweep({"atmosphere.r0_500nm_m": [0.12, 0.25, 0.3], "ao.mode": ["none"]}))
+    assert set(after) - set(before) == {"grid_r0_500nm_m-0.3_mode-none"}
+    assert all(after[name] == config for name, config in before.items())
+
+
+def test_expanding_twice_changes_nothing():
+    study = with_sweep({"atmosphere.r0_500nm_m": [0.12, 0.25]})
+    once = expand_sweeps(study)
+    assert expand_sweeps(once) == once
+
+
+def test_two_parameters_with_one_last_part_are_named_by_their_paths():
+    study = with_sweep({"camera.wavelength_m": [8e-7], "lgs.wavelength_m": [5.89e-7]})
+    assert [p.case for p in sweep_points(study, "grid")] == ["grid_camera.wavelength_m-8e-07_lgs.wavelength_m-5.89e-07"]
+
+
+@pytest.mark.parametrize("parameters, key", [
+    ({"atmosphere.r0_cm": [10]}, "sweeps.grid.parameters.atmosphere.r0_cm"),
+    ({"atmosphere": [1]}, "sweeps.grid.parameters.atmosphere"),
+    ({"atmosphere.r0_500nm_m": []}, "sweeps.grid.parameters.atmosphere.r0_500nm_m"),
+])
+def test_a_bad_sweep_is_refused_naming_its_key(parameters, key):
+    with pytest.raises(ConfigError, match=key.replace(".", r"\.")):
+        validate_study(with_sweep(parameters))
+
+
+def test_a_sweep_figure_needs_a_known_sweep_and_one_of_its_parameters():
+    study = with_sweep({"atmosphere.r0_500nm_m": [0.12]})
+    study["figures"]["grid"]["sweep"] = "nope"
+    with pytest.raises(ConfigError, match=r"figures\.grid\.sweep"):
+        validate_study(study)
+    study = with_sweep({"atmosphere.r0_500nm_m": [0.12]})
+    study["figures"]["grid"]["parameter"] = "ao.mode"
+    with pytest.raises(ConfigError, match=r"figures\.grid\.parameter"):
+        validate_study(study)
+
+
+def test_a_value_that_cannot_name_a_case_is_refused():
+    study = with_sweep({"lgs.profile": ["range gate"]})
+    with pytest.raises(ConfigError, match=r"sweeps\.grid\.parameters"):
+        validate_study(study)
+
+
+def test_implausible_values_are_warned_about_by_key_and_stay_valid():
+    """r0 written in cm as metres (10 m), a wavelength in nm as metres: both valid to the
+    schema, both warned about, naming the key; the tiny study's values raise nothing."""
+    study = tiny()
+    assert plausibility_warnings(validate_study(study)) == []
+    study["cases"]["good"]["atmosphere"]["r0_500nm_m"] = 10
+    study["cases"]["bad"]["camera"] = {"wavelength_m": 800.0}
+    warnings = plausibility_warnings(validate_study(study))
+    assert len(warnings) == 2
+    assert "cases.good.atmosphere.r0_500nm_m" in warnings[0] and "10 m" in warnings[0]
+    assert "cases.bad.camera.wavelength_m" in warnings[1]
+
+
+def test_cases_no_figure_shows_are_named():
+    study = tiny()
+    study["cases"]["spare"] = copy.deepcopy(study["cases"]["good"])
+    assert unused_cases(expand_sweeps(study)) == ["spare"]
