@@ -15,6 +15,7 @@ from ..atmosphere.screens import ScreenSet
 from ..atmosphere.statistics import Layer
 from ..geometry import LineOfSight, uplink_line_of_sight
 from ..optics.propagation import Propagator
+from ..seeds import wfs_noise_rng
 from ..units import REFERENCE_WAVELENGTH_M
 from .beacons import LgsConfig
 from .shack_hartmann import ShackHartmann, lgs_elongation_otf, measure_slopes
@@ -24,7 +25,7 @@ class LgsSensor:
     """Every beacon's Shack-Hartmann of one case, sampling the shared screens.
 
     ``photons_per_subaperture`` None: noiseless; otherwise photon and read noise
-    drawn from ``default_rng([seed, 1])``.
+    drawn from :func:`luckyao.seeds.wfs_noise_rng` of ``seed``.
     """
 
     def __init__(self, lgs: LgsConfig, wfs: ShackHartmann, exposure_steps: int, layers: list[Layer],
@@ -33,7 +34,7 @@ class LgsSensor:
         self.lgs, self.wfs, self.exposure_steps = lgs, wfs, exposure_steps
         self.photons = photons_per_subaperture
         self.read_noise_e = read_noise_e
-        self.rng = np.random.default_rng([seed, 1])
+        self.rng = wfs_noise_rng(seed)
         height = lgs.height_m
         directions = lgs.directions_rad
         launch = lgs.launch_xy_m
