@@ -93,7 +93,7 @@ def lucky_case(settings_config: dict, frames_path, telemetry_path, out_path, scr
             axis_strehl[target] = replay.axis_strehl[0]
     ds = xr.concat([per_target[t] for t in range(n_targets)], dim="target", data_vars="all", coords="minimal",
                    compat="override")
-    del ds.attrs["frames_drawn_again"]  # per target: its log line
+    ds.attrs.pop("frames_drawn_again", None)  # per target: in its log line
     ds["reference_target"] = ((), -1 if reference is None else reference, {
         "units": "1", "long_name": "target whose frames give every target its image criteria and recentring "
                                   "(-1: each target its own)"})
