@@ -35,7 +35,7 @@ from bench_step import products  # noqa: E402
 
 from luckyao.study.case import Case  # noqa: E402
 from luckyao.study.config import imaged_targets, load_study, turbulence_spec  # noqa: E402
-from luckyao.study.simulation import lgs_chain, replay_frames, simulate  # noqa: E402
+from luckyao.study.simulation import Replay, lgs_chain, simulate  # noqa: E402
 from luckyao.study.turbulence import read_screens, write_screens  # noqa: E402
 
 N_STEPS = 600
@@ -53,7 +53,7 @@ def loop_seconds(case: Case, screens, reconstructors, commands, imaged=None):
 
 def replay_seconds(case: Case, screens, targets, dm_commands) -> float:
     start = time.perf_counter()
-    for _ in replay_frames(case, screens, targets, dm_commands)():
+    for _ in Replay(case, screens, targets, dm_commands)():
         pass
     return time.perf_counter() - start
 

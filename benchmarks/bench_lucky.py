@@ -12,7 +12,7 @@ centre wandering by ~0.25" rms. Criteria: strehl, d50 and three external ones (a
 Runs a ``--frames`` cube (default 512: 256 frames generated once, cached in the temporary
 directory, and tiled) and a quarter of it: their difference gives the per-frame cost, the
 rest is the fixed cost (scoring the integrated images). Prints ``seconds_<frames>``,
-``scoring_s_<frames>`` (time in ``selection._score``: the integrated images' Strehl, d50, FWHM,
+``scoring_s_<frames>`` (time in ``scoring.score_partial_sums``: the integrated images' Strehl, d50, FWHM,
 of the run and, with ``--blocks``, of each time block), ``fixed_s``,
 ``frames_per_s``, ``detector_frames_per_s`` (per-frame part only) and
 ``extrapolated_s_25000`` (fixed + 25,000 frames). With ``--cube N``, also a real run over an N-frame cube
@@ -40,9 +40,10 @@ from pathlib import Path  # noqa: E402
 import numpy as np  # noqa: E402
 
 from luckyao.atmosphere.statistics import von_karman_psd  # noqa: E402
-from luckyao.lucky import selection  # noqa: E402
+from luckyao.lucky import pipeline  # noqa: E402
 from luckyao.lucky.detector import Detector  # noqa: E402
-from luckyao.lucky.selection import ExternalCriterion, run_lucky  # noqa: E402
+from luckyao.lucky.pipeline import run_lucky  # noqa: E402
+from luckyao.lucky.ranking import ExternalCriterion  # noqa: E402
 from luckyao.optics.imaging import Camera, Imager  # noqa: E402
 from luckyao.optics.pupil import Telescope  # noqa: E402
 
@@ -120,11 +121,11 @@ def tiled(frames: np.ndarray, n_frames: int):
 
 
 SCORING = {"s": 0.0, "images": 0}
-_score = getattr(selection, "_score", None)
+_score = pipeline.score_partial_sums
 
 
 def _timed_score(partial, *args, **kwargs):
-    """``selection._score`` (integrated images of the whole run and of each time block), timed."""
+    """``scoring.score_partial_sums`` (integrated images of the whole run and of each time block), timed."""
     t0 = time.perf_counter()
     out = _score(partial, *args, **kwargs)
     SCORING["s"] += time.perf_counter() - t0
@@ -132,8 +133,7 @@ def _timed_score(partial, *args, **kwargs):
     return out
 
 
-if _score is not None:
-    selection._score = _timed_score
+pipeline.score_partial_sums = _timed_score
 
 
 def run(frames: np.ndarray, n_frames: int, n_blocks: int = 0) -> float:

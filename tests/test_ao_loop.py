@@ -28,7 +28,7 @@ from luckyao.study.case import Case
 from luckyao.study.config import commands_spec, deep_merge, load_study, reconstructor_spec, turbulence_spec
 from luckyao.study.reconstructor import build_commands, build_reconstructors
 from luckyao.study.simulation import lgs_chain, simulate
-from luckyao.study.turbulence import strip_specs
+from luckyao.study.turbulence import TurbulenceSpec, strip_specs
 from luckyao.tomography.reconstructor import pupil_points
 from luckyao.units import REFERENCE_WAVELENGTH_M
 from luckyao.wfs.sensor import LgsSensor
@@ -39,7 +39,7 @@ GROUND_S = 0.8
 
 
 def _screens(spec: dict, seed: int) -> ScreenSet:
-    specs = strip_specs(spec)
+    specs = strip_specs(TurbulenceSpec.from_config(spec))
     return ScreenSet.from_screens(specs, [strip_screen(s, spec["outer_scale_m"], np.random.default_rng([seed, i]))
                                           for i, s in enumerate(specs)])
 

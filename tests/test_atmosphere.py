@@ -128,7 +128,7 @@ def test_screens_made_layers_at_once_are_the_same_numbers(tmp_path):
     """``write_screens(threads=3)`` makes layers concurrently (largest first): each layer still
     draws from its own ``default_rng([seed, layer])``, so the file is byte for byte that of one
     thread, and each layer is ``strip_screen`` of its own stream."""
-    from luckyao.study.turbulence import read_screens, strip_specs, write_screens
+    from luckyao.study.turbulence import TurbulenceSpec, read_screens, strip_specs, write_screens
 
     spec = {"seed": 5, "duration_s": 0.5, "max_pixel_m": 0.05, "field_radius_arcsec": 10, "min_along_m": 20.0,
             "min_across_m": 4.0, "time_step_s": 0.0025, "diameter_m": 1.0, "outer_scale_m": L0_M,
@@ -138,6 +138,6 @@ def test_screens_made_layers_at_once_are_the_same_numbers(tmp_path):
         write_screens(spec, tmp_path / f"{threads}.npy", tmp_path / f"{threads}.nc", {}, threads=threads)
     assert (tmp_path / "1.npy").read_bytes() == (tmp_path / "3.npy").read_bytes()
     screens = read_screens(tmp_path / "3.npy", tmp_path / "3.nc")
-    for i, s in enumerate(strip_specs(spec)):
+    for i, s in enumerate(strip_specs(TurbulenceSpec.from_config(spec))):
         np.testing.assert_array_equal(screens.screen(i),
                                       strip_screen(s, L0_M, np.random.default_rng([spec["seed"], i])))

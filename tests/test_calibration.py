@@ -15,7 +15,7 @@ from luckyao.study.case import Case
 from luckyao.study.config import calibration_spec, commands_spec, deep_merge, reconstructor_spec, turbulence_spec
 from luckyao.study.reconstructor import build_commands, build_reconstructors
 from luckyao.study.simulation import lgs_chain, simulate
-from luckyao.study.turbulence import strip_specs
+from luckyao.study.turbulence import TurbulenceSpec, strip_specs
 from luckyao.units import ARCSEC_RAD, REFERENCE_WAVELENGTH_M
 from luckyao.wfs import shack_hartmann as sh
 from luckyao.wfs.beacons import LgsConfig
@@ -160,7 +160,7 @@ centroiders and the calibration (d889eb8) wrote it, on this machine."""
 def tiny_ltao():
     study = yaml.safe_load(TINY.read_text())
     config = deep_merge(study["base"], {"lgs": {"enabled": True}, "ao": {"mode": "ltao"}, "duration_s": 0.1})
-    specs = strip_specs(turbulence_spec(study, config))
+    specs = strip_specs(TurbulenceSpec.from_config(turbulence_spec(study, config)))
     screens = ScreenSet.from_screens(specs, [strip_screen(s, 20.0, np.random.default_rng([7, i]))
                                              for i, s in enumerate(specs)])
     reconstructors = build_reconstructors(reconstructor_spec(config))["reconstructor"].values

@@ -116,3 +116,17 @@ def test_a_post_processing_setting_reruns_no_time_loop(study_copy):
     overlay = workdir / "fractions.yaml"
     overlay.write_text(yaml.safe_dump({"lucky": {"fractions": [0.05, 0.1, 0.5, 1.0]}}))
     assert _rules_planned(_snakemake(copy, workdir, "--dry-run", "--configfile", str(overlay))) == {"lucky", "figure", "export"}
+
+
+def test_a_name_imported_from_a_package_depends_on_the_module_that_defines_it(tmp_path):
+    """Packages re-export their public objects lazily (``luckyao.exports``): importing a package
+    imports none of its modules, so the closure of ``from luckyao.lucky import run_lucky`` holds
+    ``lucky/pipeline.py`` (followed through ``EXPORTS``) and not the package's other modules."""
+    from luckyao.study.code_deps import PACKAGE_ROOT, import_closure
+
+    copy = tmp_path / "luckyao"
+    shutil.copytree(PACKAGE_ROOT, copy, ignore=shutil.ignore_patterns("__pycache__"))
+    (copy / "user.py").write_text("from luckyao.lucky import run_lucky\nfrom luckyao.optics import Imager\n")
+    files = {str(p.relative_to(copy)) for p in import_closure("luckyao.user", copy)}
+    assert {"lucky/pipeline.py", "lucky/__init__.py", "optics/imaging.py"} <= files
+    assert "optics/long_exposure.py" not in files and "study/figures.py" not in files

@@ -3,7 +3,8 @@
 import numpy as np
 import pytest
 
-from luckyao.lucky.detector import Detector, apply_detector, detect
+from luckyao.lucky.detector import Detector, KeyedNoise
+from reference import apply_detector, detect
 
 
 def two_level_frames(k, n=64):
@@ -177,3 +178,18 @@ def test_keyed_photons_never_land_on_dark_pixels():
         dark[10:20, 30:33] = False
         assert not electrons[:, dark].any()
         assert electrons.sum() == pytest.approx(50 * photons, abs=5 * np.sqrt(50 * photons))
+
+
+def test_a_chunk_is_detected_only_while_its_sums_are_held():
+    """``KeyedNoise.prepare`` returns the chunk that detects; once another chunk is prepared the
+    first one's sums are gone, and detecting it is refused rather than drawing from the wrong sums."""
+    rng = np.random.default_rng(2)
+    first, second = (rng.random((3, 8, 8)).astype(np.float32) for _ in range(2))
+    noise = KeyedNoise(8, 4)
+    assert not hasattr(noise, "detect")
+    chunk = noise.prepare(first)
+    frames = chunk.detect(Detector("a", 100.0, 1.0), 5, 0)[0].copy()
+    noise.prepare(second)
+    with pytest.raises(RuntimeError, match="replaced"):
+        chunk.detect(Detector("a", 100.0, 1.0), 5, 0)
+    np.testing.assert_array_equal(noise.prepare(first).detect(Detector("a", 100.0, 1.0), 5, 0)[0], frames)

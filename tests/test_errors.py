@@ -21,13 +21,13 @@ from test_longexposure import CASE, SPEC
 
 from luckyao.atmosphere.screens import ScreenSet, strip_screen
 from luckyao.lucky.detector import Detector
-from luckyao.lucky.selection import run_lucky
+from luckyao.lucky.pipeline import run_lucky
 from luckyao.optics.imaging import Imager
 from luckyao.study.case import Case
 from luckyao.study.config import deep_merge
 from luckyao.study.postprocess import batch_mean_error
 from luckyao.study.simulation import simulate
-from luckyao.study.turbulence import strip_specs
+from luckyao.study.turbulence import TurbulenceSpec, strip_specs
 
 N_SEEDS = 12
 N_BLOCKS = 5
@@ -40,7 +40,7 @@ WIND_M_S = [10.0, 12.5, 15.0]  # 0.1-0.15 m per 10 ms frame on the 1 m pupil: su
 def seeds():
     """Per seed: the per-frame axis values and the frames (frame, y, x)."""
     spec = dict(SPEC, duration_s=DURATION_S + 0.05, wind_speed_m_s=WIND_M_S)
-    specs = strip_specs(spec)
+    specs = strip_specs(TurbulenceSpec.from_config(spec))
     system = Case.from_config(deep_merge(CASE, {"duration_s": DURATION_S, "atmosphere": {"wind_speed_m_s": WIND_M_S}}))
     runs = []
     for seed in range(N_SEEDS):

@@ -13,7 +13,8 @@ import pytest
 from luckyao.atmosphere.screens import ScreenSet, strip_screen
 from luckyao.lucky.detector import Detector
 from luckyao.lucky.metrics import strehl
-from luckyao.lucky.selection import ImageReference, recentring_shifts_px, run_lucky, shift_frames
+from luckyao.lucky.accumulation import recentring_shifts_px
+from luckyao.lucky.pipeline import ImageReference, run_lucky
 from luckyao.study.case import Case
 from luckyao.study.config import (
     commands_spec,
@@ -24,8 +25,9 @@ from luckyao.study.config import (
     turbulence_spec,
 )
 from luckyao.study.reconstructor import build_commands, build_reconstructors
-from luckyao.study.simulation import lgs_chain, replay_frames, simulate
-from luckyao.study.turbulence import strip_specs
+from luckyao.study.simulation import Replay, lgs_chain, simulate
+from luckyao.study.turbulence import TurbulenceSpec, strip_specs
+from reference import shift_frames
 
 DURATION_S = 0.4
 TARGETS_ARCSEC = [[0.0, 0.0], [20.0, 0.0], [40.0, 0.0]]
@@ -37,7 +39,7 @@ class _Field:
         self.config = deep_merge(cases["ltao_r0_13.5cm"], {"duration_s": DURATION_S, "targets_arcsec": TARGETS_ARCSEC,
                                                            "reference_target": 0})
         spec = dict(turbulence_spec(config, self.config), duration_s=DURATION_S + 0.05, max_pixel_m=0.033)
-        specs = strip_specs(spec)
+        specs = strip_specs(TurbulenceSpec.from_config(spec))
         self.screens = ScreenSet.from_screens(specs, [strip_screen(s, spec["outer_scale_m"], np.random.default_rng(
             [3, i])) for i, s in enumerate(specs)])
         self.case = Case.from_config(self.config)
@@ -74,17 +76,19 @@ def test_the_simulation_of_a_field_images_only_the_star(field, runs):
 
 def test_replayed_frames_are_the_simulated_frames(field, runs):
     """Recomputing the science path from the screens and the recorded DM commands gives
-    the frames the time loop would have stored, bit for bit, and the loop's telemetry
+    the frames the time loop would have stored, bit for bit (and their value on the axis), and the loop's telemetry
     does not depend on which targets it images."""
     (full, all_frames), (telemetry, star_frames) = runs
     np.testing.assert_array_equal(star_frames[0], all_frames[0])
     for name in ("lgs_rms_nm", "lgs_residual_rms_nm", "true_rms_nm", "dm_commands_m", "r0_500nm_m"):
         np.testing.assert_array_equal(telemetry[name].values, full[name].values)
-    replay = replay_frames(field.case, field.screens, [1, 2], telemetry.dm_commands_m.values, block_frames=7)
+    replay = Replay(field.case, field.screens, [1, 2], telemetry.dm_commands_m.values, block_frames=7)
     replayed = np.concatenate([frames for _, frames in replay()], axis=1)
     np.testing.assert_array_equal(replayed, all_frames[1:])
+    # the replay returns the frames' value on the axis as the time loop records it
+    np.testing.assert_array_equal(replay.axis_strehl, full.axis_strehl.values[1:])
     # the DM matters: replaying without it gives other frames (the check above can fail)
-    flat = replay_frames(field.case, field.screens, [1], None)
+    flat = Replay(field.case, field.screens, [1], None)
     assert not np.array_equal(next(iter(flat()))[1][0], all_frames[1, :64])
 
 

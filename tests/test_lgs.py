@@ -4,7 +4,8 @@ import numpy as np
 
 from luckyao.geometry import cone_coordinates, footprint_scale
 from luckyao.units import ARCSEC_RAD
-from luckyao.wfs.beacons import LgsConfig, altitude_profile, elongation_length_rad, elongation_offsets_rad
+from luckyao.wfs.beacons import LgsConfig, altitude_profile, elongation_offsets_rad
+from reference import elongation_length_rad
 
 
 def test_asterism_is_a_40_arcsec_circle():

@@ -7,7 +7,7 @@ from luckyao.study.case import Case
 from luckyao.study.config import load_study, reconstructor_spec, turbulence_spec
 from luckyao.study.reconstructor import build_reconstructors
 from luckyao.study.simulation import lgs_chain, simulate
-from luckyao.study.turbulence import strip_specs
+from luckyao.study.turbulence import TurbulenceSpec, strip_specs
 
 
 def test_lgs_rms_correlates_with_the_true_rms():
@@ -21,7 +21,7 @@ def test_lgs_rms_correlates_with_the_true_rms():
     study, cases = load_study("config/config.yaml")
     case = dict(cases["noao_r0_13.5cm"], duration_s=1.2)
     spec = dict(turbulence_spec(study, case), duration_s=1.25, max_pixel_m=0.033)
-    specs = strip_specs(spec)
+    specs = strip_specs(TurbulenceSpec.from_config(spec))
     screens = ScreenSet.from_screens(
         specs, [strip_screen(s, spec["outer_scale_m"], np.random.default_rng([5, i])) for i, s in enumerate(specs)])
     reconstructors = build_reconstructors(reconstructor_spec(case))["reconstructor"].values

@@ -13,7 +13,7 @@ from luckyao.study.case import Case
 from luckyao.study.config import deep_merge
 from luckyao.study.postprocess import batch_mean_error
 from luckyao.study.simulation import simulate
-from luckyao.study.turbulence import strip_specs
+from luckyao.study.turbulence import TurbulenceSpec, strip_specs
 
 # A 1 m telescope and three fast layers, so 20 s of frozen flow cross ~150 outer
 # scales: the Monte-Carlo error of the long exposure is a few percent.
@@ -32,7 +32,7 @@ SPEC = {"seed": 1, "duration_s": 20.0, "max_pixel_m": 0.016, "field_radius_arcse
 
 
 def test_uncorrected_long_exposure_strehl_matches_theory():
-    specs = strip_specs(SPEC)
+    specs = strip_specs(TurbulenceSpec.from_config(SPEC))
     screens = ScreenSet.from_screens(
         specs, [strip_screen(s, 20.0, np.random.default_rng([SPEC["seed"], i])) for i, s in enumerate(specs)])
     system = Case.from_config(CASE)

@@ -7,11 +7,11 @@ from scipy import integrate, optimize, special
 from luckyao.lucky.metrics import (
     EncircledEnergy,
     centroid_px,
-    d50_arcsec,
     fwhm_arcsec,
     interpolant_patch,
     strehl,
 )
+from reference import d50_arcsec
 from luckyao.optics.imaging import Camera, Imager
 from luckyao.optics.pupil import Telescope, TiltRemover
 from luckyao.units import ARCSEC_RAD

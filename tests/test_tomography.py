@@ -9,11 +9,12 @@ from luckyao.geometry import cone_coordinates
 from luckyao.optics.pupil import Telescope, TiltRemover
 from luckyao.tomography.criterion import lgs_rms_nm, lucky_frame_rms_nm
 from luckyao.tomography.prior import TurbulencePrior
-from luckyao.tomography.reconstructor import factorize, layer_reconstructor, pupil_points, target_reconstructor
+from luckyao.tomography.reconstructor import factorize, pupil_points, target_reconstructor
 from luckyao.tomography.slopes import SlopeGeometry, slope_covariance
 from luckyao.units import ARCSEC_RAD
 from luckyao.wfs.beacons import LgsConfig
 from luckyao.wfs.shack_hartmann import ShackHartmann
+from reference import layer_reconstructor
 
 TELESCOPE = Telescope(4.2, 1.2)
 WFS = ShackHartmann(TELESCOPE, 8, 532e-9)

@@ -1,7 +1,13 @@
 """Adaptive-optics correction: the deformable mirror, open-loop command matrices and the
-correction applied in the time loop (LTAO, GLAO; tip-tilt left alone).
+correction applied in the time loop (LTAO, GLAO; tip-tilt left alone)."""
 
-Public objects, by module --
-dm: DeformableMirror; control: command_matrix, dm_slopes_matrix, ground_layers;
-correction: OpenLoopCorrection, DelayedDm.
-"""
+from ..exports import lazy_exports
+
+EXPORTS = {
+    "dm": ("DeformableMirror",),
+    "control": ("command_matrix", "dm_slopes_matrix", "ground_layers"),
+    "correction": ("OpenLoopCorrection", "DelayedDm"),
+}
+"""Public objects, by module (imported on first use: :mod:`luckyao.exports`)."""
+
+__all__, __getattr__, __dir__ = lazy_exports(__name__, EXPORTS)

@@ -15,7 +15,6 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.fft
 
-from ..units import ARCSEC_RAD
 from .statistics import Layer, von_karman_psd
 
 
@@ -74,20 +73,6 @@ def strip_spec(layer: Layer, time_step_s: float, n_steps: int, dx_m: float,
     return StripSpec(dx_m=dx_m, n_major=n_major, n_minor=n_minor, major_axis=major,
                      skew=int(round(n_major * slope)), origin_m=(origin_major, origin_minor),
                      step_samples=(step_m * e_major / dx_m, step_m * e_minor / dx_m))
-
-
-def strip_specs(spec: dict) -> list[StripSpec]:
-    """Each layer's strip geometry for a turbulence spec (``study.config.turbulence_spec``):
-    footprints within the field radius of every line of sight, for the spec's duration."""
-    n_steps = int(np.ceil(spec["duration_s"] / spec["time_step_s"] - 1e-9)) + 1
-    specs = []
-    for height, speed, direction in zip(spec["height_m"], spec["wind_speed_m_s"], spec["wind_direction_deg"]):
-        layer = Layer(height, 1.0, speed, direction)
-        # square pupil grids reach sqrt(2) D / 2 in their corners
-        radius = 0.75 * spec["diameter_m"] + spec["field_radius_arcsec"] * ARCSEC_RAD * height
-        specs.append(strip_spec(layer, spec["time_step_s"], n_steps, spec["max_pixel_m"], radius,
-                                spec["min_along_m"], spec["min_across_m"]))
-    return specs
 
 
 def _across_rows(dfy: float, refined: int, split: int, subharmonic_levels: int):

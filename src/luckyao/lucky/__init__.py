@@ -1,7 +1,16 @@
-"""Lucky imaging of a frame cube: detector noise, image metrics, selection and shift-and-add.
+"""Lucky imaging of a frame cube: detector noise, image metrics, ranking, recentred
+accumulation and scoring, driven by :func:`run_lucky` (module ``pipeline``); ``kernels``
+holds the compiled noise, encircled-energy and accumulation loops."""
 
-Public objects, by module --
-detector: Detector, apply_detector, KeyedNoise, detect, detector_key; metrics: strehl, fwhm_arcsec,
-d50_arcsec, EncircledEnergy; selection: run_lucky, ExternalCriterion, ImageReference, rank_frames,
-shift_and_add; kernels: the compiled noise, encircled-energy and accumulation loops.
-"""
+from ..exports import lazy_exports
+
+EXPORTS = {
+    "detector": ("Detector", "KeyedNoise"),
+    "metrics": ("strehl", "fwhm_arcsec", "centroid_px", "score_images", "EncircledEnergy"),
+    "ranking": ("ExternalCriterion", "fraction_counts", "rank_frames", "selection_bins"),
+    "accumulation": ("recentring_shifts_px", "PartialSums", "TimeBlocks"),
+    "pipeline": ("run_lucky", "ImageReference"),
+}
+"""Public objects, by module (imported on first use: :mod:`luckyao.exports`)."""
+
+__all__, __getattr__, __dir__ = lazy_exports(__name__, EXPORTS)

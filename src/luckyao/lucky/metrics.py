@@ -1,4 +1,4 @@
-"""Image-quality metrics of detector images: centroid, Strehl, d50 and FWHM.
+"""Image-quality metrics of detector images: centroid, Strehl, d50 and FWHM, each written once.
 
 Conventions (as in :mod:`luckyao.optics.imaging`): images are real arrays ``(..., n, n)``
 indexed ``[y, x]``; pixel ``(i, j)`` has its centre at coordinates ``(y, x) = (i, j)``
@@ -32,13 +32,16 @@ def centroid_px(images: np.ndarray) -> np.ndarray:
     coordinates (index ``[y, x]``); accumulated in float64. NaN where the flux is 0.
     """
     images = np.asarray(images)
-    ny, nx = images.shape[-2:]
     rows = images.sum(axis=-1, dtype=np.float64)  # (..., ny)
     cols = images.sum(axis=-2, dtype=np.float64)  # (..., nx)
-    flux = rows.sum(axis=-1)
+    return centroid_from_sums(rows, cols, rows.sum(axis=-1))
+
+
+def centroid_from_sums(rows: np.ndarray, cols: np.ndarray, flux: np.ndarray) -> np.ndarray:
+    """:func:`centroid_px` of images from their row and column sums (..., n) float64 and flux (...)."""
     with np.errstate(invalid="ignore", divide="ignore"):
-        cy = rows @ np.arange(ny, dtype=np.float64) / flux
-        cx = cols @ np.arange(nx, dtype=np.float64) / flux
+        cy = rows @ np.arange(rows.shape[-1], dtype=np.float64) / flux
+        cx = cols @ np.arange(cols.shape[-1], dtype=np.float64) / flux
     return np.stack([cy, cx], axis=-1)
 
 
@@ -52,9 +55,35 @@ def strehl(images: np.ndarray, diffraction_limited_peak: float) -> np.ndarray:
     """
     images = np.asarray(images)
     peak = images.max(axis=(-2, -1)).astype(np.float64)
-    flux = images.sum(axis=(-2, -1), dtype=np.float64)
+    return strehl_from(peak, images.sum(axis=(-2, -1), dtype=np.float64), diffraction_limited_peak)
+
+
+def strehl_from(peak: np.ndarray, flux: np.ndarray, diffraction_limited_peak: float) -> np.ndarray:
+    """:func:`strehl` of images from their peak and flux: NaN where the flux is not positive,
+    else :func:`relative_to_diffraction_limit` of the peak."""
+    return np.where(flux > 0, relative_to_diffraction_limit(peak, flux, diffraction_limited_peak), np.nan)
+
+
+def relative_to_diffraction_limit(value: np.ndarray, flux: np.ndarray, diffraction_limited_peak: float) -> np.ndarray:
+    """``value / (P_dl F)``: a pixel value relative to the diffraction-limited peak of the image's
+    flux ``F`` (inf or NaN where ``F`` is 0; the Strehl ratio when ``value`` is the peak)."""
     with np.errstate(invalid="ignore", divide="ignore"):
-        return np.where(flux > 0, peak / (diffraction_limited_peak * flux), np.nan)
+        return value / (diffraction_limited_peak * flux)
+
+
+def d50_from_radius(radius_px: np.ndarray, pixel_scale_arcsec: float) -> np.ndarray:
+    """The 50%-energy diameter [arcsec] of the half-energy radius [pixel]: ``2 R_50 scale``."""
+    return 2 * radius_px * pixel_scale_arcsec
+
+
+def score_images(images: np.ndarray, diffraction_limited_peak: float, pixel_scale_arcsec: float,
+                 encircled: "EncircledEnergy") -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Strehl ratio, FWHM [arcsec] and d50 [arcsec] (centred on the centre of gravity) of
+    images (..., n, n), each of shape (...): :func:`strehl`, :func:`fwhm_arcsec` and
+    :func:`d50_from_radius` of :meth:`EncircledEnergy.radius_px`."""
+    s = strehl(images, diffraction_limited_peak)
+    d50 = d50_from_radius(encircled.radius_px(images), pixel_scale_arcsec)
+    return s, fwhm_arcsec(images, pixel_scale_arcsec), d50
 
 
 @dataclass(frozen=True, eq=False)
@@ -220,19 +249,6 @@ def _first_crossing(radii: np.ndarray, values: np.ndarray, level: float) -> np.n
     out = np.empty(len(v))
     first_crossing(np.ascontiguousarray(radii, dtype=np.float64), v, float(level), out)
     return out.reshape(values.shape[:-1])
-
-
-def d50_arcsec(images: np.ndarray, pixel_scale_arcsec: float,
-               encircled_energy: EncircledEnergy | None = None) -> np.ndarray:
-    """Diameter [arcsec] of the circle, centred on the centre of gravity, holding half the flux.
-
-    ``images`` (..., n, n); returns shape (...). Exact for band-limited periodic
-    images (see :class:`EncircledEnergy`, whose instance can be passed to reuse its
-    kernel); ``2 R_50 * pixel_scale_arcsec`` with ``EE(R_50) = F / 2``.
-    """
-    images = np.asarray(images)
-    ee = encircled_energy if encircled_energy is not None else EncircledEnergy(images.shape[-1])
-    return 2.0 * ee.radius_px(images) * pixel_scale_arcsec
 
 
 def fwhm_arcsec(images: np.ndarray, pixel_scale_arcsec: float,

@@ -104,3 +104,10 @@ class Imager:
     def diffraction_limited_peak(self) -> float:
         """Peak of the unit-flux diffraction-limited image, the Strehl reference."""
         return float(self.diffraction_limited.max())
+
+    def axis_value(self, images: np.ndarray) -> np.ndarray:
+        """The unit-flux images' (..., n, n) value on the optical axis, pixel (n/2, n/2), over the
+        diffraction-limited peak, shape (...): its mean over frames is the long exposure's Strehl
+        (no recentring; its peak is on the axis). In the images' precision (float32 in, float32 out)."""
+        c = self.camera.n_pixels // 2
+        return images[..., c, c] / self.diffraction_limited_peak

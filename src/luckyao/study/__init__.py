@@ -1,7 +1,18 @@
 """The study around the physics: typed config, the time loop, cached products, datasets,
-figures and the command line the workflow calls.
+figures and the command line the workflow calls."""
 
-Public objects, by module --
-config: load_study, ConfigError; case: Case; simulation: simulate; turbulence / reconstructor:
-the cached products; postprocess: lucky_case; figures: draw_figure; cli: main.
-"""
+from ..exports import lazy_exports
+
+EXPORTS = {
+    "config": ("load_study", "ConfigError"),
+    "case": ("Case",),
+    "lucky_settings": ("LuckySettings",),
+    "simulation": ("simulate", "Replay"),
+    "turbulence": ("write_screens", "read_screens"),
+    "postprocess": ("lucky_case",),
+    "figures": ("draw_figure",),
+    "cli": ("main",),
+}
+"""Public objects, by module (imported on first use: :mod:`luckyao.exports`)."""
+
+__all__, __getattr__, __dir__ = lazy_exports(__name__, EXPORTS)

@@ -52,6 +52,19 @@ def _imported_modules(path: Path, module: str) -> set[str]:
     return found
 
 
+def _reexporting_module(name: str, root: Path) -> list[str]:
+    """The module that re-exports object ``luckyao.pkg.Name`` from package ``luckyao.pkg``'s
+    ``EXPORTS`` (:mod:`luckyao.exports`), as a list (empty if none)."""
+    package, _, obj = name.rpartition(".")
+    init = module_file(package, root)
+    if init.name != "__init__.py" or not init.exists():
+        return []
+    for node in ast.parse(init.read_text(), filename=str(init)).body:
+        if isinstance(node, ast.Assign) and [getattr(t, "id", None) for t in node.targets] == ["EXPORTS"]:
+            return [f"{package}.{module}" for module, names in ast.literal_eval(node.value).items() if obj in names]
+    return []
+
+
 def import_closure(module: str, root: Path = PACKAGE_ROOT) -> list[Path]:
     """Sorted files of ``module`` and everything it imports from ``luckyao``,
     including the ``__init__.py`` of each package they live in."""
@@ -62,7 +75,8 @@ def import_closure(module: str, root: Path = PACKAGE_ROOT) -> list[Path]:
             continue
         seen.add(name)
         path = module_file(name, root)
-        if not path.exists():  # an object imported from a package, not a module
+        if not path.exists():  # an object imported from a package, not a module: the module it re-exports
+            todo += _reexporting_module(name, root)
             continue
         files.add(path)
         parts = name.split(".")

@@ -390,8 +390,8 @@ def image_crop_px(lucky: dict) -> int | None:
 
 
 def error_blocks(lucky: dict) -> int:
-    """Time blocks for the Monte-Carlo errors: ``lucky.error_blocks``, by default 5 (the schema's)."""
-    return lucky.get("error_blocks", 5)
+    """Time blocks for the Monte-Carlo errors: ``lucky.error_blocks``, by default the schema's."""
+    return lucky.get("error_blocks", load_schema()["properties"]["lucky"]["properties"]["error_blocks"]["default"])
 
 
 def sweep_detectors(lucky: dict) -> dict:

@@ -12,12 +12,12 @@ import logging
 import numpy as np
 import xarray as xr
 
-from ..lucky.detector import Detector
-from ..lucky.selection import ExternalCriterion, ImageReference, run_lucky
-from .case import Case
-from .config import canonical_json, image_crop_px, imaged_targets
+from ..lucky.pipeline import ImageReference, run_lucky
+from ..lucky.ranking import ExternalCriterion
+from ..seeds import target_seed
 from .datasets import iter_frame_blocks, open_dataset, provenance, require_finite, write_dataset
-from .simulation import replay_frames
+from .lucky_settings import LuckySettings
+from .simulation import Replay
 from .turbulence import read_screens
 
 log = logging.getLogger(__name__)
@@ -38,66 +38,66 @@ def batch_mean_error(values: np.ndarray, n_blocks: int) -> float:
     return float(means.std(ddof=1) / np.sqrt(n_blocks))
 
 
-def _replayed(case: dict, telemetry: xr.Dataset, target: int, screens_path, screens_metadata_path):
-    """The frames of one target replayed from the screens and the recorded DM commands,
-    as ``iter_frame_blocks`` gives stored ones; each frame's value on the axis goes into
-    the telemetry's ``axis_strehl`` as the simulation records it for the targets it images."""
+def _frames_of(settings: LuckySettings, telemetry: xr.Dataset, target: int, frames_path, screens_path,
+               screens_metadata_path):
+    """A target's frames for :func:`.pipeline.run_lucky`: stored, or replayed from the screens and
+    the recorded DM commands (:class:`.simulation.Replay`, whose values on the axis the caller
+    reads once they are made); the replay, or None."""
+    if target in settings.imaged_targets:
+        return iter_frame_blocks(frames_path, target), None
     if not screens_path:
         raise ValueError(f"target {target} was not imaged by the simulation: its replay needs the screens")
-    physics = Case.from_config(case)
     commands = telemetry["dm_commands_m"].values if "dm_commands_m" in telemetry else None
-    replay = replay_frames(physics, read_screens(screens_path, screens_metadata_path), [target], commands)
-    axis = telemetry["axis_strehl"].values[target]
-    peak, centre = float(telemetry.attrs["diffraction_limited_peak"]), physics.camera.n_pixels // 2
+    replay = Replay(settings.case, read_screens(screens_path, screens_metadata_path), [target], commands)
 
     def iterate():
         for start, frames in replay():
-            axis[start:start + frames.shape[1]] = frames[0, :, centre, centre] / peak
             yield start, frames[0]
 
-    return iterate
+    return iterate, replay
 
 
-def lucky_case(settings: dict, frames_path, telemetry_path, out_path, screens_path="",
+def _external_criteria(telemetry: xr.Dataset, target: int) -> list[ExternalCriterion]:
+    """The target's selection criteria from the telemetry (:data:`EXTERNAL_CRITERIA`, and the oracle)."""
+    external = [ExternalCriterion(name, telemetry[f"{name}_nm"].values[target], False, "nm", long_name)
+                for name, long_name in EXTERNAL_CRITERIA if f"{name}_nm" in telemetry]
+    if "lgs_residual_rms_nm" in telemetry:
+        external.append(ExternalCriterion("true_rms", telemetry.true_rms_nm.values[target], False, "nm",
+                                          "true corrected tilt-removed rms along the target (oracle)"))
+    return external
+
+
+def lucky_case(settings_config: dict, frames_path, telemetry_path, out_path, screens_path="",
                screens_metadata_path="") -> None:
-    """Write one case's ``lucky.nc``; ``settings`` from ``config.lucky_settings``. The
+    """Write one case's ``lucky.nc``; ``settings_config`` from ``config.lucky_settings``. The
     targets the simulation did not image (:func:`.config.imaged_targets`) are replayed
-    from the screens with the recorded DM commands (:func:`.simulation.replay_frames`)."""
+    from the screens with the recorded DM commands (:class:`.simulation.Replay`)."""
+    settings = LuckySettings.from_settings(settings_config)
     telemetry = open_dataset(telemetry_path, "telemetry", allow_nan={"axis_strehl"})  # NaN: a target not imaged
-    case = settings["case_config"]
-    imaged = imaged_targets(case)
-    detectors = [Detector(name, d["photons_per_frame"], d["read_noise_e"])
-                 for name, d in settings["detectors"].items()]
-    pixel_scale = Case.from_config(case).camera.pixel_scale_arcsec
     n_frames, n_targets = telemetry.sizes["frame"], telemetry.sizes["target"]
-    n_blocks = settings["error_blocks"]
-    reference = case.get("reference_target")
+    n_blocks, reference = settings.error_blocks, settings.reference_target
+    peak = float(telemetry.attrs["diffraction_limited_peak"])
+    axis_strehl = telemetry.axis_strehl.values.copy()  # (target, frame); the replayed targets' filled below
     order = list(range(n_targets)) if reference is None else [reference] + [
         t for t in range(n_targets) if t != reference]  # the star first: the others take its measurements
     per_target = {}
     for target in order:
         log.info("target %d/%d", target + 1, n_targets)
-        external = [ExternalCriterion(name, telemetry[f"{name}_nm"].values[target], False, "nm", long_name)
-                    for name, long_name in EXTERNAL_CRITERIA if f"{name}_nm" in telemetry]
-        if "lgs_residual_rms_nm" in telemetry:
-            external.append(ExternalCriterion("true_rms", telemetry.true_rms_nm.values[target], False, "nm",
-                                              "true corrected tilt-removed rms along the target (oracle)"))
         image_reference = None if reference in (None, target) else ImageReference.of(per_target[reference])
-        if target in imaged:
-            frames = iter_frame_blocks(frames_path, target)
-        else:
-            frames = _replayed(case, telemetry, target, screens_path, screens_metadata_path)
+        frames, replay = _frames_of(settings, telemetry, target, frames_path, screens_path, screens_metadata_path)
         per_target[target] = run_lucky(
-            frames, n_frames, detectors, settings["fractions"],
-            float(telemetry.attrs["diffraction_limited_peak"]), pixel_scale, settings["seed"] + target,
-            criteria_external=external, reference=image_reference, n_blocks=n_blocks,
-            image_crop_px=image_crop_px(settings))
+            frames, n_frames, settings.detectors, settings.fractions, peak, settings.case.camera.pixel_scale_arcsec,
+            target_seed(settings.seed, target), criteria_external=_external_criteria(telemetry, target),
+            reference=image_reference, n_blocks=n_blocks, image_crop_px=settings.image_crop_px)
+        if replay is not None:
+            axis_strehl[target] = replay.axis_strehl[0]
     ds = xr.concat([per_target[t] for t in range(n_targets)], dim="target", data_vars="all", coords="minimal",
                    compat="override")
+    ds.attrs.pop("frames_drawn_again", None)  # per target: in its log line
     ds["reference_target"] = ((), -1 if reference is None else reference, {
         "units": "1", "long_name": "target whose frames give every target its image criteria and recentring "
                                   "(-1: each target its own)"})
-    errors = [batch_mean_error(telemetry.axis_strehl.values[t], n_blocks) for t in range(ds.sizes["target"])]
+    errors = [batch_mean_error(axis_strehl[t], n_blocks) for t in range(ds.sizes["target"])]
     ds["long_exposure_strehl_error"] = ("target", errors, {
         "units": "1", "long_name": f"Monte-Carlo standard error of the long-exposure Strehl (no recentring), "
                                    f"from {n_blocks} batch means"})
@@ -112,9 +112,10 @@ def lucky_case(settings: dict, frames_path, telemetry_path, out_path, screens_pa
     ds["mean_r0_500nm_m"] = ((), float(telemetry.r0_500nm_m.mean()),
                              {"units": "m", "long_name": "mean Fried parameter at 500 nm over the case"})
     ds = ds.assign_coords(target_x_arcsec=telemetry.target_x_arcsec, target_y_arcsec=telemetry.target_y_arcsec)
-    ds.attrs.update(provenance(f"luckyao lucky imaging of case {settings['case']}", case, settings["seed"]))
-    ds.attrs["case"] = settings["case"]
-    ds.attrs["lucky_settings_json"] = canonical_json({k: v for k, v in settings.items() if k != "case_config"})
+    ds.attrs.update(provenance(f"luckyao lucky imaging of case {settings.case_name}", settings.case_config,
+                               settings.seed))
+    ds.attrs["case"] = settings.case_name
+    ds.attrs["lucky_settings_json"] = settings.settings_json
     ds.attrs["telemetry_config_sha256"] = telemetry.attrs["config_sha256"]
     # A noisy image can have no positive flux (a few photons under read noise): its metrics
     # are undefined (NaN), per frame or integrated. Nothing else may be NaN: every value of

@@ -30,7 +30,7 @@ import os
 import shutil
 from pathlib import Path
 
-from ..atmosphere.screens import strip_specs
+from .turbulence import TurbulenceSpec, strip_specs
 from .config import (commands_key, commands_spec, frame_count, imaged_targets, lucky_settings, reconstructor_key,
                      reconstructor_spec, turbulence_key, turbulence_spec)
 
@@ -48,7 +48,7 @@ FRAME_BLOCK = 64
 
 def screens_samples(spec: dict) -> list[int]:
     """Samples of each layer's strip of a ``config.turbulence_spec``."""
-    return [s.n_major * s.n_minor for s in strip_specs(spec)]
+    return [s.n_major * s.n_minor for s in strip_specs(TurbulenceSpec.from_config(spec))]
 
 
 def screens_bytes(spec: dict) -> float:

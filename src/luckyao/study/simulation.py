@@ -66,10 +66,11 @@ class SciencePath:
         return ao.deformable_mirror(telescope).grid_surface(self.imager.grid, self.imager.mask)
 
     def frame(self, frame: int, steps: np.ndarray, layer_scales: np.ndarray, dm=None,
-              truth: bool = True) -> tuple[np.ndarray, np.ndarray | None]:
-        """The frame's unit-flux images (imaged, n, n) float32 (the mean of its steps' images)
-        and, with ``truth``, the tilt-removed rms (targets,) [rad at 500 nm] of its residual
-        phases; ``dm`` (anything with ``surface_at(step)``) corrects every step."""
+              truth: bool = True) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+        """The frame's unit-flux images (imaged, n, n) float32 (the mean of its steps' images),
+        their value on the axis (imaged,) (:meth:`Imager.axis_value`) and, with ``truth``, the
+        tilt-removed rms (targets,) [rad at 500 nm] of its residual phases; ``dm`` (anything
+        with ``surface_at(step)``) corrects every step."""
         self._intensity.fill(0.0)
         rms2 = np.zeros(len(self.targets)) if truth else None
         phases = self.propagator.sample_valid(steps, layer_scales)  # (k, n_targets, n_valid)
@@ -82,7 +83,7 @@ class SciencePath:
             if truth:
                 rms2 += self.tilt.rms(phase_500) ** 2
         images = self.imager.to_pixels(self._intensity / self.case.steps_per_frame)
-        return images, None if rms2 is None else np.sqrt(rms2 / self.case.steps_per_frame)
+        return images, self.imager.axis_value(images), None if rms2 is None else np.sqrt(rms2 / self.case.steps_per_frame)
 
 
 def simulate(case: Case, screens: ScreenSet, write_frames, sensor: LgsSensor | None = None,
@@ -96,7 +97,7 @@ def simulate(case: Case, screens: ScreenSet, write_frames, sensor: LgsSensor | N
     ``ao`` settings, :func:`luckyao.study.reconstructor.build_commands`) the DM
     corrects every step, each frame gets its ``lgs_residual_rms_nm`` and every
     exposure's DM commands are recorded (``dm_commands_m``), so that the science path
-    of the targets not imaged can be replayed (:func:`replay_frames`).
+    of the targets not imaged can be replayed (:class:`Replay`).
 
     Per frame it records the truth (tilt-removed rms) and the imaged targets' frame
     value on the optical axis over the diffraction-limited peak, whose mean over frames
@@ -146,8 +147,7 @@ def simulate(case: Case, screens: ScreenSet, write_frames, sensor: LgsSensor | N
                     residual = np.stack([correction.residual_slopes(int(s), exposure)
                                          for s, exposure in zip(starts, slopes)])
                     lgs_residual_rms[:, frame] = lucky_frame_rms_nm(estimator.rms_nm(residual))
-            buffer[:, j], rms = science.frame(frame, steps, layer_scales, correction)
-            axis_strehl[imaged, frame] = buffer[:, j, n_pix // 2, n_pix // 2] / imager.diffraction_limited_peak
+            buffer[:, j], axis_strehl[imaged, frame], rms = science.frame(frame, steps, layer_scales, correction)
             true_rms_nm[:, frame] = phase_rad_to_nm(rms, REFERENCE_WAVELENGTH_M)
             r0_frame[frame] = np.mean(case.r0.r0_m(steps * case.time_step_s))
         write_frames(start, buffer[:, :count])
@@ -192,30 +192,37 @@ def simulate(case: Case, screens: ScreenSet, write_frames, sensor: LgsSensor | N
     )
 
 
-def replay_frames(case: Case, screens: ScreenSet, targets, dm_commands_m: np.ndarray | None,
-                  block_frames: int = 64):
-    """Callable returning an iterator of ``(start, frames (target, k, n, n))``: the science
-    path of ``targets`` (indices into ``case.targets``) replayed frame by frame, corrected
-    by the recorded DM commands (``dm_commands_m`` (exposure, actuator) of
-    :func:`simulate`, None without AO). Recomputing these frames is as fast as simulating
-    them and stores nothing: the frames of a field case's off-axis targets are made
-    where they are used (post-processing), not kept on disk."""
-    spf, exposure_steps = case.steps_per_frame, case.wfs.exposure_steps
+class Replay:
+    """The science path of some of a case's targets replayed frame by frame, corrected by the
+    recorded DM commands: called, an iterator of ``(start, frames (target, k, n, n))``, and the
+    frames' value on the axis (:meth:`Imager.axis_value`) in :attr:`axis_strehl` (target,
+    frame) once they have been made. Recomputing these frames is as fast as simulating them
+    and stores nothing: the frames of a field case's off-axis targets are made where they are
+    used (post-processing), not kept on disk."""
 
-    def iterate():
-        science = SciencePath(case, screens, targets, range(len(targets)))
+    def __init__(self, case: Case, screens: ScreenSet, targets, dm_commands_m: np.ndarray | None,
+                 block_frames: int = 64):
+        """``targets``: indices into ``case.targets``; ``dm_commands_m`` (exposure, actuator) of
+        :func:`simulate`, None without AO."""
+        self.case, self.screens, self.targets = case, screens, list(targets)
+        self.dm_commands_m, self.block_frames = dm_commands_m, block_frames
+        self.axis_strehl = np.full((len(self.targets), case.n_frames), np.nan, dtype=np.float32)
+
+    def __call__(self):
+        case = self.case
+        spf, exposure_steps = case.steps_per_frame, case.wfs.exposure_steps
+        science = SciencePath(case, self.screens, self.targets, range(len(self.targets)))
         dm = None
-        if dm_commands_m is not None:
+        if self.dm_commands_m is not None:
             dm = DelayedDm(science.dm_surface(), exposure_steps, case.ao.delay_steps, spf)
-        block = np.empty((len(targets), block_frames) + (case.camera.n_pixels,) * 2, dtype=np.float32)
-        for start in range(0, case.n_frames, block_frames):
-            count = min(block_frames, case.n_frames - start)
+        block = np.empty((len(self.targets), self.block_frames) + (case.camera.n_pixels,) * 2, dtype=np.float32)
+        for start in range(0, case.n_frames, self.block_frames):
+            count = min(self.block_frames, case.n_frames - start)
             for j in range(count):
                 steps = (start + j) * spf + np.arange(spf)
                 if dm is not None:
                     for step in steps[::exposure_steps]:
-                        dm.apply(int(step), dm_commands_m[step // exposure_steps])
-                block[:, j], _ = science.frame(start + j, steps, case.layer_scales(steps), dm, truth=False)
+                        dm.apply(int(step), self.dm_commands_m[step // exposure_steps])
+                block[:, j], self.axis_strehl[:, start + j], _ = science.frame(
+                    start + j, steps, case.layer_scales(steps), dm, truth=False)
             yield start, block[:, :count].copy()
-
-    return iterate

@@ -10,23 +10,71 @@ screens are several GB), described by a small netCDF file with provenance.
 import logging
 import time
 from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
 
 import numpy as np
 import xarray as xr
 
-from ..atmosphere.screens import ScreenSet, StripSpec, strip_screen, strip_specs
+from ..atmosphere.screens import ScreenSet, StripSpec, strip_screen, strip_spec
+from ..atmosphere.statistics import Layer
+from ..seeds import screen_rng
+from ..units import ARCSEC_RAD
 from .datasets import atomic_path, open_dataset, require_finite, set_aside, write_dataset
 
 log = logging.getLogger(__name__)
 
 
-def write_screens(spec: dict, screens_path, metadata_path, attrs: dict, threads: int = 1) -> None:
-    """Generate every layer's strip into one flat float32 ``.npy`` (memory-mappable)
-    and describe it in a small netCDF file. Layer ``i`` draws from
-    ``default_rng([seed, i])``, so the layers are independent: ``threads`` of them are
-    made at once (largest first; numpy and scipy release the GIL), the same numbers
+@dataclass(frozen=True)
+class TurbulenceSpec:
+    """Everything the shared screens depend on: the seed, their duration and sampling, the
+    telescope's reach into the field, the outer scale and each layer's height and wind."""
+
+    seed: int
+    duration_s: float
+    time_step_s: float
+    max_pixel_m: float
+    diameter_m: float
+    field_radius_arcsec: float
+    min_along_m: float
+    min_across_m: float
+    outer_scale_m: float
+    height_m: tuple[float, ...]
+    wind_speed_m_s: tuple[float, ...]
+    wind_direction_deg: tuple[float, ...]
+
+    @classmethod
+    def from_config(cls, spec: dict) -> "TurbulenceSpec":
+        """From a ``config.turbulence_spec`` dict."""
+        return cls(spec["seed"], spec["duration_s"], spec["time_step_s"], spec["max_pixel_m"], spec["diameter_m"],
+                   spec["field_radius_arcsec"], spec["min_along_m"], spec["min_across_m"], spec["outer_scale_m"],
+                   tuple(spec["height_m"]), tuple(spec["wind_speed_m_s"]), tuple(spec["wind_direction_deg"]))
+
+    @property
+    def n_steps(self) -> int:
+        """Time steps the screens serve: the duration's, rounded up (robust to its rounding), and one more."""
+        return int(np.ceil(self.duration_s / self.time_step_s - 1e-9)) + 1
+
+
+def strip_specs(spec: TurbulenceSpec) -> list[StripSpec]:
+    """Each layer's strip geometry for a turbulence spec."""
+    specs = []
+    for height, speed, direction in zip(spec.height_m, spec.wind_speed_m_s, spec.wind_direction_deg):
+        layer = Layer(height, 1.0, speed, direction)
+        # square pupil grids reach sqrt(2) D / 2 in their corners
+        radius = 0.75 * spec.diameter_m + spec.field_radius_arcsec * ARCSEC_RAD * height
+        specs.append(strip_spec(layer, spec.time_step_s, spec.n_steps, spec.max_pixel_m, radius,
+                                spec.min_along_m, spec.min_across_m))
+    return specs
+
+
+def write_screens(spec_config: dict, screens_path, metadata_path, attrs: dict, threads: int = 1) -> None:
+    """Generate every layer's strip of a ``config.turbulence_spec`` dict into one flat float32
+    ``.npy`` (memory-mappable) and describe it in a small netCDF file. Layer ``i`` draws from
+    ``screen_rng(seed, i)`` (:mod:`luckyao.seeds`), so the layers are independent: ``threads``
+    of them are made at once (largest first; numpy and scipy release the GIL), the same numbers
     for any ``threads``; memory ~12 bytes per sample of the layers in progress. Both
     files appear only when complete."""
+    spec = TurbulenceSpec.from_config(spec_config)
     specs = strip_specs(spec)
     sizes = [s.n_major * s.n_minor for s in specs]
     starts = np.concatenate([[0], np.cumsum(sizes)[:-1]]).astype(np.int64)
@@ -36,7 +84,7 @@ def write_screens(spec: dict, screens_path, metadata_path, attrs: dict, threads:
         def generate(i: int, out: np.ndarray) -> None:
             begin = time.perf_counter()
             s = specs[i]
-            screen = strip_screen(s, spec["outer_scale_m"], np.random.default_rng([spec["seed"], i]))
+            screen = strip_screen(s, spec.outer_scale_m, screen_rng(spec.seed, i))
             out[starts[i]:starts[i] + sizes[i]] = screen.ravel()
             log.info("layer %d/%d: %d x %d samples of %.4f m in %.1f s", i + 1, len(specs),
                      s.n_major, s.n_minor, s.dx_m, time.perf_counter() - begin)

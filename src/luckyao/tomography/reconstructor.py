@@ -53,13 +53,3 @@ def target_reconstructor(prior: TurbulencePrior, geometry: SlopeGeometry, noise_
                              layer_indices=layer_indices, n_edge=n_edge)
     rec = apply_inverse(cholesky_lower, cross).astype(np.float32)
     return remove_tilt_rows(rec, points_xy_m) if remove_tilt else rec
-
-
-def layer_reconstructor(prior: TurbulencePrior, geometry: SlopeGeometry, layer_index: int,
-                        points_xy_m: np.ndarray, cholesky_lower: np.ndarray,
-                        n_edge: int = 2) -> np.ndarray:
-    """Virtual-DM estimate (n_points, n_slopes) [m / rad] of layer ``layer_index``
-    at layer coordinates ``points_xy_m`` [m]."""
-    cross = cross_covariance(prior, geometry, points_xy_m, (0.0, 0.0), source_height_m=0.0,
-                             layer_indices=[layer_index], n_edge=n_edge)
-    return apply_inverse(cholesky_lower, cross)

@@ -116,8 +116,3 @@ def elongation_offsets_rad(subaperture_xy_m, launch_xy_m, beacon_height_m: float
     baseline = np.asarray(subaperture_xy_m, dtype=float) - np.asarray(launch_xy_m, dtype=float)
     factor = 1.0 / beacon_height_m - 1.0 / np.asarray(altitudes_m, dtype=float)
     return baseline[:, None, :] * factor[None, :, None]
-
-
-def elongation_length_rad(baseline_m, depth_m: float, beacon_height_m: float):
-    """Small-angle elongation ``b dH / H^2`` [rad] (range gate of depth ``dH``)."""
-    return np.asarray(baseline_m, dtype=float) * depth_m / beacon_height_m**2

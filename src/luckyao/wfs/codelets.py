@@ -136,8 +136,8 @@ def _unit(k: int, n: int) -> complex:
 def load_module(name: str, source: str):
     """Import generated ``source`` as module ``luckyao_kernel_<name>_<digest>``.
 
-    The source is written once to a file under the user cache directory
-    (``$XDG_CACHE_HOME/luckyao/kernels``, else a private temporary one) so that
+    The source is written once to a file in this package's ``__pycache__/generated``
+    (:func:`_kernel_directory`; a private temporary folder if that is read-only) so that
     numba's on-disk cache (``cache=True``) keeps its compiled functions between
     processes; the file name carries a digest of the source, so an existing
     file is never rewritten and a changed generator gives a new file.

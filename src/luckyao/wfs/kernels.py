@@ -19,8 +19,8 @@ at most ``n_launch``. Then ``D = C x elongation x uplink`` and the pixels
 Layout: a chunk of ``lanes`` fields (sub-apertures of one beacon, or the
 exposure's launch fields) is stored innermost, so that every statement is a
 SIMD loop over lanes. The DFTs, the autocorrelation and the pixel sums are
-straight-line code generated per size (:mod:`luckyao.codelets`, cached on
-disk); the rest is plain numba, with small per-size drivers.
+straight-line code generated per size (:mod:`luckyao.wfs.codelets`, cached
+in the package's ``__pycache__``); the rest is plain numba, with small per-size drivers.
 """
 
 from functools import cache

@@ -15,6 +15,7 @@ from ..atmosphere.screens import ScreenSet
 from ..atmosphere.statistics import Layer
 from ..geometry import LineOfSight, uplink_line_of_sight
 from ..optics.propagation import Propagator
+from ..seeds import wfs_noise_rng
 from ..units import REFERENCE_WAVELENGTH_M
 from .beacons import LgsConfig
 from .centroiders import CentreOfGravity, SlopeEstimator
@@ -49,7 +50,7 @@ class LgsSensor:
     """Every beacon's Shack-Hartmann of one case, sampling the shared screens.
 
     ``photons_per_subaperture`` None: noiseless; otherwise photon and read noise
-    drawn from ``default_rng([seed, 1])``. ``estimator``: images -> slopes
+    drawn from :func:`luckyao.seeds.wfs_noise_rng` of ``seed``. ``estimator``: images -> slopes
     (default: centre of gravity, uncalibrated).
     """
 
@@ -60,7 +61,7 @@ class LgsSensor:
         self.estimator = SlopeEstimator(CentreOfGravity(wfs)) if estimator is None else estimator
         self.photons = photons_per_subaperture
         self.read_noise_e = read_noise_e
-        self.rng = np.random.default_rng([seed, 1])
+        self.rng = wfs_noise_rng(seed)
         height = lgs.height_m
         directions = lgs.directions_rad
         launch = lgs.launch_xy_m

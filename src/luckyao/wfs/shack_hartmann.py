@@ -435,9 +435,9 @@ def exposure_images(wfs: ShackHartmann, downlink_phase_rad: np.ndarray,
     Returns (n_beacons, n_valid, n_pixels, n_pixels) float32 in units of a
     full sub-aperture's flux over the exposure.
 
-    Same result (to float32 rounding) as :func:`reference_exposure_images`,
-    which chains :func:`intensity_samples`, :func:`intensity_spectra`,
-    :func:`uplink_otf` and :func:`pixel_images`; here compiled kernels
+    Same result (to float32 rounding) as chaining :func:`intensity_samples`,
+    :func:`intensity_spectra`, :func:`uplink_otf` and :func:`pixel_images` (the tests'
+    reference); here compiled kernels
     (:mod:`luckyao.wfs.kernels`) get the exposure spectra as field
     autocorrelations, only on the harmonics where the spot OTFs are non-zero.
     """
@@ -463,24 +463,3 @@ def exposure_images(wfs: ShackHartmann, downlink_phase_rad: np.ndarray,
     plan.exposure(downlink.reshape(-1), n_steps, wfs.grid.n_pix, ratio, norm, plan.sources,
                   plan.amp, plan.lane_subaperture, el, spot, plan.ey, plan.ex, images)
     return images
-
-
-def reference_exposure_images(wfs: ShackHartmann, downlink_phase_rad: np.ndarray,
-                              phase_wavelength_m: float, elongation: np.ndarray | None = None,
-                              uplink_phase_rad: np.ndarray | None = None) -> np.ndarray:
-    """:func:`exposure_images` by the step-by-step public functions (slow, for tests)."""
-    downlink = np.asarray(downlink_phase_rad)
-    if downlink.ndim != 4:
-        raise ValueError("downlink phase must be (T, n_beacons, n, n)")
-    n_steps = downlink.shape[0]
-    intensity = intensity_samples(wfs, downlink[0], phase_wavelength_m)
-    for step in range(1, n_steps):  # T = 2 steps per exposure
-        intensity_samples(wfs, downlink[step], phase_wavelength_m, out=intensity)
-    spectra = intensity_spectra(wfs, intensity)
-    spectra *= np.float32(1.0 / n_steps)
-    if elongation is not None:
-        spectra *= elongation
-    if uplink_phase_rad is not None:
-        uplink = uplink_otf(wfs, uplink_phase_rad, phase_wavelength_m).mean(axis=0)
-        spectra *= uplink[:, None]
-    return pixel_images(wfs, spectra)

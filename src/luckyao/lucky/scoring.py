@@ -1,0 +1,74 @@
+"""Scores of lucky imaging: per-frame measures, and the integrated images of the partial sums.
+
+Every score is :mod:`.metrics`'s (one home per formula); here they are applied to the
+detected frames of a chunk (:func:`measure_frames`, from the sums the detection gives),
+to the partial sums of :class:`.accumulation.PartialSums` (:func:`integrated_images`,
+:func:`score_partial_sums`) and to the frames' values near the axis
+(:func:`value_at_peak`).
+"""
+
+import numpy as np
+
+from . import kernels
+from .metrics import (EncircledEnergy, centroid_from_sums, d50_from_radius, relative_to_diffraction_limit,
+                      score_images, strehl_from)
+
+
+def frame_sums(frames: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Row and column sums (k, n) float64 and peaks (k,) float32 of frames (k, n, n) float32
+    (:func:`luckyao.lucky.kernels.frame_sums`; the noisy frames get them from their detection)."""
+    k, n = frames.shape[:2]
+    rows, cols, peak = np.empty((k, n)), np.empty((k, n)), np.empty(k, np.float32)
+    kernels.frame_sums(frames, rows, cols, peak)
+    return rows, cols, peak
+
+
+def measure_frames(frames: np.ndarray, rows: np.ndarray, cols: np.ndarray, peak: np.ndarray,
+                   encircled: EncircledEnergy, diffraction_limited_peak: float) -> tuple[np.ndarray, ...]:
+    """Flux (k,), centre of gravity (k, 2) (y, x) [pixel], Strehl (k,) and d50 [pixel] (k,) of
+    frames (k, n, n) from their row and column sums (k, n) and peaks (k,) (:func:`frame_sums`);
+    NaN where the flux is not positive. The d50 is centred on the centre of gravity
+    (:meth:`EncircledEnergy.radius_px_binned`, the encircled energy summed by radial bins)."""
+    flux = rows.sum(axis=1)
+    centroids = centroid_from_sums(rows, cols, flux)
+    strehl_ratio = strehl_from(peak, flux, diffraction_limited_peak)
+    radius = encircled.radius_px_binned(frames, centroids, flux=flux)
+    return flux, centroids, strehl_ratio, d50_from_radius(radius, 1.0)
+
+
+def integrated_images(partial: np.ndarray, n_crit: int, n_bins: int, last_bin: np.ndarray) -> np.ndarray:
+    """Integrated images (criterion, fraction, det, n, n) of the (det, criterion x bin, n, n)
+    partial sums: fraction ``k``'s is the sum of bins ``0..last_bin[k]`` (cumulative sums made
+    in place: ``partial`` is overwritten). Contiguous, so the d50's batches need no copy."""
+    n_det, _, ny, nx = partial.shape
+    cumulative = partial.reshape(n_det, n_crit, n_bins, ny, nx)
+    for b in range(1, n_bins):  # np.cumsum's sums, in place
+        cumulative[:, :, b] += cumulative[:, :, b - 1]
+    images = np.empty((n_crit, len(last_bin), n_det, ny, nx))
+    for i in range(n_det):
+        images[:, :, i] = cumulative[i][:, last_bin]
+    return images
+
+
+def score_partial_sums(partial: np.ndarray, n_crit: int, n_bins: int, last_bin: np.ndarray,
+                       encircled: EncircledEnergy, diffraction_limited_peak: float,
+                       pixel_scale_arcsec: float) -> tuple[np.ndarray, ...]:
+    """The :func:`integrated_images` of partial sums (``partial`` is overwritten) and their
+    Strehl, FWHM [arcsec] and d50 [arcsec] (criterion, fraction, det) (:func:`.metrics.score_images`).
+    One code path for the noisy and the noiseless sums, so equal sums give bit-identical scores."""
+    images = integrated_images(partial, n_crit, n_bins, last_bin)
+    return (images, *score_images(images, diffraction_limited_peak, pixel_scale_arcsec, encircled))
+
+
+def value_at_peak(frame_window: np.ndarray, window: np.ndarray, long_images: np.ndarray,
+                  frame_flux: np.ndarray, diffraction_limited_peak: float) -> np.ndarray:
+    """Per detector and frame, ``frame[p] / (flux P_dl)`` at the brightest pixel ``p`` of
+    the long exposure (``long_images`` (det, n, n)) among the pixels ``window`` (flat
+    indices, around the axis), from the frames' values there (``frame_window``). When
+    ``p`` is the long exposure's peak and the fluxes are equal, their mean is its
+    Strehl (:func:`.metrics.strehl`)."""
+    out = np.empty(frame_flux.shape)
+    for i, image in enumerate(long_images):
+        k = np.argmax(image.ravel()[window])
+        out[i] = relative_to_diffraction_limit(frame_window[i, :, k], frame_flux[i], diffraction_limited_peak)
+    return out

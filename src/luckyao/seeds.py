@@ -1,0 +1,44 @@
+"""Every random stream of the study, derived from its one seed.
+
+* Phase screens: layer ``i`` draws from ``default_rng([seed, i])`` (:func:`screen_rng`).
+* LGS WFS noise (photon and read noise of every exposure): ``default_rng([seed,
+  WFS_NOISE_STREAM])`` (:func:`wfs_noise_rng`); the tag lies above every layer index, so the
+  WFS noise never replays a layer's numbers (``SeedSequence`` ignores trailing zero words, so
+  the streams differ by a nonzero word, not by their length).
+* Lucky-camera detector noise: target ``t`` of a case uses the seed ``seed + t``
+  (:func:`target_seed`), and frame ``f`` of detector ``name`` draws from compiled streams keyed
+  by ``(seed + t, detector_key(name), f)`` (:func:`luckyao.lucky.kernels.stream_key`; a
+  splitmix64 / xoshiro256++ family of its own, not numpy's).
+"""
+
+import zlib
+
+import numpy as np
+
+WFS_NOISE_STREAM = 0xFFFF_FFFF
+"""Second entropy word of the WFS-noise stream: above any layer index of the screens."""
+
+
+def screen_rng(seed: int, layer: int) -> np.random.Generator:
+    """The generator of layer ``layer``'s phase screen."""
+    if not 0 <= layer < WFS_NOISE_STREAM:
+        raise ValueError(f"layer index {layer} out of [0, {WFS_NOISE_STREAM})")
+    return np.random.default_rng([seed, layer])
+
+
+def wfs_noise_rng(seed: int) -> np.random.Generator:
+    """The generator of the LGS wavefront sensors' photon and read noise."""
+    return np.random.default_rng([seed, WFS_NOISE_STREAM])
+
+
+def target_seed(seed: int, target: int) -> int:
+    """The seed of target ``target``'s lucky-camera detector noise."""
+    return seed + target
+
+
+def detector_key(name: str) -> int:
+    """Stable integer of a detector's name that keys its noise: ``zlib.crc32`` of its UTF-8.
+
+    Not Python's ``hash`` (salted per process), so draws are reproducible across runs.
+    """
+    return zlib.crc32(name.encode("utf-8"))
