@@ -111,12 +111,20 @@ def _fitting(value, comment: str) -> str:
     return comment if max(20, len(str(value)) + 2) + len(comment) <= 66 else ""
 
 
+def _set_card(header, key: str, value, comment: str) -> None:
+    """A header card; a NaN or infinite value (a noise-dominated image's metric) is written
+    as FITS's undefined value, which FITS has instead of NaN, and said so in the comment."""
+    if isinstance(value, float) and not np.isfinite(value):
+        value, comment = None, f"undefined ({value}): {comment}"
+    header[key] = (value, _fitting(value, comment))
+
+
 def _hdu(fits, image: np.ndarray, name: str, cards: list[tuple]):
     hdu = fits.ImageHDU(np.asarray(image, dtype=np.float32), name=name)
     for key, value, comment in cards:
-        hdu.header[key] = (value, _fitting(value, comment))
+        _set_card(hdu.header, key, value, comment)
     hdu.header["BUNIT"] = ("1", "pixel over the whole frame's flux")
-    hdu.header["FLUXFRAC"] = (float(np.sum(image, dtype=np.float64)), "the frame's flux in this image")
+    _set_card(hdu.header, "FLUXFRAC", float(np.sum(image, dtype=np.float64)), "the frame's flux in this image")
     return hdu
 
 
@@ -128,7 +136,7 @@ def export_fits(lucky_path, out_path, detectors=None) -> int:
     lucky = open_dataset(lucky_path, "lucky")
     primary = fits.PrimaryHDU()
     for key, value, comment in _provenance_cards(lucky):
-        primary.header[key] = (value, _fitting(value, comment))
+        _set_card(primary.header, key, value, comment)
     hdus = list(image_hdus(lucky, detectors))
     primary.header["NIMAGES"] = (len(hdus), "image extensions that follow")
     partial = f"{out_path}.partial"
