@@ -383,15 +383,20 @@ def figure_default(key: str):
     return load_schema()["properties"]["figures"]["additionalProperties"]["properties"][key]["default"]
 
 
+def _lucky_value(lucky: dict, key: str):
+    """``lucky[key]``, by default the schema's default of that key."""
+    return lucky.get(key, load_schema()["properties"]["lucky"]["properties"][key]["default"])
+
+
 def image_crop_px(lucky: dict) -> int | None:
     """Pixels across the images ``lucky.nc`` keeps: ``lucky.image_crop_px``, by default the
     schema's (64); None: the whole frame."""
-    return lucky.get("image_crop_px", load_schema()["properties"]["lucky"]["properties"]["image_crop_px"]["default"])
+    return _lucky_value(lucky, "image_crop_px")
 
 
 def error_blocks(lucky: dict) -> int:
     """Time blocks for the Monte-Carlo errors: ``lucky.error_blocks``, by default the schema's."""
-    return lucky.get("error_blocks", load_schema()["properties"]["lucky"]["properties"]["error_blocks"]["default"])
+    return _lucky_value(lucky, "error_blocks")
 
 
 def sweep_detectors(lucky: dict) -> dict:
