@@ -21,6 +21,7 @@ from .case import Case, WfsSettings, lgs_from, seeing_from, telescope_from, wfs_
 
 log = logging.getLogger(__name__)
 
+
 def case_centroider(settings: WfsSettings, wfs: ShackHartmann, elongation, seeing):
     """The centroider of a case's WFS settings (the correlation's reference: the
     long-exposure spot of the case's mean seeing)."""
