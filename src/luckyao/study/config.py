@@ -185,7 +185,8 @@ def _check_figure(fig_id: str, figure: dict, cases: dict, config: dict) -> None:
         if case not in config["cases"]:
             raise ConfigError(f"config key 'figures.{fig_id}.cases': unknown case '{case}'")
     needs = {"quality_vs_fraction": ("criteria",), "quality_vs_distance": ("criteria", "fractions"),
-             "quality_vs_parameter": ("sweep", "criteria", "fractions"), "psf_gallery": ("criteria", "fractions")}
+             "quality_vs_parameter": ("sweep", "criteria", "fractions"), "psf_gallery": ("criteria", "fractions"),
+             "quality_vs_diameter": ("criteria", "fractions")}
     for key in needs.get(figure["kind"], ()):
         if key not in figure:
             raise ConfigError(f"config key 'figures.{fig_id}.{key}': required for {figure['kind']}")
