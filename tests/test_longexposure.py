@@ -8,11 +8,11 @@ import pytest
 import yaml
 
 from luckyao.atmosphere.screens import ScreenSet, strip_screen
+from luckyao.lucky.accumulation import batch_mean_error
 from luckyao.optics.imaging import Imager
 from luckyao.optics.long_exposure import long_exposure_strehl
 from luckyao.study.case import Case
 from luckyao.study.config import deep_merge, load_study, validate_study
-from luckyao.study.postprocess import batch_mean_error
 from luckyao.study.simulation import simulate
 from luckyao.study.turbulence import TurbulenceSpec, strip_specs
 

@@ -11,7 +11,7 @@ case's time blocks (batch means, as every other error of the study).
 import numpy as np
 import xarray as xr
 
-from ..postprocess import batch_mean_error
+from ...lucky.accumulation import batch_mean_error
 from .settings import FigureSettings
 from .style import CRITERIA, LINE_STYLES, MARKERS, colour, new_figure, with_error
 
