@@ -10,14 +10,26 @@ as ``ms_per_step_<case> <median>``; last, ``ms_per_step <median>``: the whole lo
 of the default AO case.
 
 Run: .venv/bin/python benchmarks/bench_step.py [config.yaml]
+
+Telescope size (``--diameters 2.5 4.2 8.2``): for each diameter, the default AO case at that
+size (its WFS, DM, obscuration and camera derived, study/scaling.py), each measured in fresh
+processes so their peak memory is their own: the reconstructor and the command matrix (build
+time, peak RSS), then the whole time loop (ms per step, median of ``--repeats`` runs, with
+its peak RSS: the products loaded, the screens of the steps, a block of frames), and the
+files a case of the default duration writes (the study's estimates, study/resources.py).
+Printed as a table and one JSON line per diameter (``size {...}``).
 """
 
+import argparse
 import dataclasses
+import json
 import os
 
 for _name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS"):
     os.environ[_name] = "1"
 
+import resource  # noqa: E402
+import subprocess  # noqa: E402
 import sys  # noqa: E402
 import tempfile  # noqa: E402
 import time  # noqa: E402
@@ -32,8 +44,9 @@ from luckyao.optics.pupil import TiltRemover  # noqa: E402
 from luckyao.study.case import Case  # noqa: E402
 from luckyao.study.calibration import build_calibration  # noqa: E402
 from luckyao.study.config import (calibration_spec, commands_spec, deep_merge, load_study,  # noqa: E402
-                                  reconstructor_spec, turbulence_spec)
+                                  reconstructor_spec, turbulence_spec, validate_study)
 from luckyao.study.reconstructor import build_commands, build_reconstructors  # noqa: E402
+from luckyao.study.resources import commands_bytes, frames_bytes, reconstructor_bytes, screens_bytes  # noqa: E402
 from luckyao.study.simulation import lgs_chain, simulate  # noqa: E402
 from luckyao.study.turbulence import read_screens, write_screens  # noqa: E402
 from luckyao.units import REFERENCE_WAVELENGTH_M  # noqa: E402
@@ -161,5 +174,106 @@ def main(config_path="config/config.yaml"):
         print(f"ms_per_step {np.median(runs[DEFAULT_CASE]):.3f}")
 
 
+def peak_rss_gb() -> float:
+    """This process's peak resident memory [GB] (Linux: ru_maxrss in kB)."""
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6
+
+
+def sized_study(config_path: str, diameter_m: float) -> tuple[dict, dict]:
+    """The study and the default AO case at ``diameter_m`` (size-dependent keys derived)."""
+    study, _ = load_study(config_path)
+    sized = dict(study, cases={"sized": {"telescope": {"diameter_m": diameter_m}, "ao": {"mode": "ltao"}}},
+                 figures={}, sweeps={})
+    return study, validate_study(sized)["sized"]
+
+
+def measure_products(config_path: str, diameter_m: float, folder: str) -> dict:
+    """Build the reconstructor, then the command matrix (each timed, with the peak RSS after it),
+    and save them with the case's WFS calibration (few draws) to ``folder`` for the loop."""
+    study, config = sized_study(config_path, diameter_m)
+    start = time.perf_counter()
+    reconstructors = build_reconstructors(reconstructor_spec(config))["reconstructor"].values
+    built = time.perf_counter()
+    out = {"reconstructor_s": built - start, "reconstructor_peak_gb": peak_rss_gb()}
+    commands = build_commands(commands_spec(config))
+    out.update(commands_s=time.perf_counter() - built, products_peak_gb=peak_rss_gb())
+    spec = calibration_spec(study, deep_merge(config, {"wfs": {"calibration_draws": CALIBRATION_DRAWS}}))
+    calibration = build_calibration(spec)
+    np.save(Path(folder) / "reconstructors.npy", reconstructors)
+    np.save(Path(folder) / "command_matrix.npy", commands["command_matrix"].values)
+    np.save(Path(folder) / "dm_slopes.npy", commands["dm_slopes"].values)
+    calibration.to_netcdf(Path(folder) / "calibration.nc")
+    return out
+
+
+def measure_loop(config_path: str, diameter_m: float, folder: str, repeats: int) -> dict:
+    """ms per step of the whole time loop (median of ``repeats``) and the peak RSS."""
+    import xarray as xr
+
+    study, config = sized_study(config_path, diameter_m)
+    config = dict(config, duration_s=N_STEPS * config["time_step_s"])
+    spec = dict(turbulence_spec(study, config), duration_s=config["duration_s"] + 0.1)
+    write_screens(spec, Path(folder) / "s.npy", Path(folder) / "s.nc", {})
+    screens = read_screens(Path(folder) / "s.npy", Path(folder) / "s.nc")
+    np.asarray(screens.flat).sum()  # page the memory-mapped screens in
+    products_ = (np.load(Path(folder) / "reconstructors.npy"),
+                 (np.load(Path(folder) / "command_matrix.npy"), np.load(Path(folder) / "dm_slopes.npy")),
+                 xr.load_dataset(Path(folder) / "calibration.nc"))
+    case = Case.from_config(config)
+    runs = [whole_loop_ms(case, screens, *products_) for _ in range(repeats)]
+    return {"ms_per_step": float(np.median(runs)), "ms_per_step_runs": runs, "loop_peak_gb": peak_rss_gb()}
+
+
+def case_files_gb(config_path: str, diameter_m: float) -> dict:
+    """The files of the case at the study's default duration (the study's estimates) [GB]."""
+    study, config = sized_study(config_path, diameter_m)
+    return {"frames_gb": frames_bytes(config) / 1e9, "screens_gb": screens_bytes(turbulence_spec(study, config)) / 1e9,
+            "reconstructor_gb": reconstructor_bytes(reconstructor_spec(config)) / 1e9,
+            "commands_gb": commands_bytes(commands_spec(config)) / 1e9,
+            "n_subapertures": config["wfs"]["n_subapertures"], "n_actuators": config["ao"]["n_actuators"],
+            "camera_pixels": config["camera"]["n_pixels"]}
+
+
+def child(stage: str, *args) -> dict:
+    """Run one stage in a fresh process (its own peak memory); its last stdout line is JSON."""
+    done = subprocess.run([sys.executable, __file__, "--stage", stage, *map(str, args)], check=True,
+                          capture_output=True, text=True)
+    return json.loads(done.stdout.strip().splitlines()[-1])
+
+
+def main_sizes(config_path: str, diameters, repeats: int) -> None:
+    rows = {}
+    for diameter_m in diameters:
+        with tempfile.TemporaryDirectory() as folder:
+            row = {"diameter_m": diameter_m, **case_files_gb(config_path, diameter_m)}
+            row.update(child("products", config_path, diameter_m, folder))
+            row.update(child("loop", config_path, diameter_m, folder, repeats))
+        rows[diameter_m] = row
+        print("size " + json.dumps(row), flush=True)
+    print("| D [m] | WFS | DM | camera px | ms/step (LTAO, 1 core) | loop peak RSS [GB] | reconstructor [s] | "
+          "command matrix [s] | their peak RSS [GB] | frames [GB] | screens [GB] |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|")
+    for d, r in rows.items():
+        print(f"| {d:g} | {r['n_subapertures']} | {r['n_actuators']} | {r['camera_pixels']} | {r['ms_per_step']:.2f} | "
+              f"{r['loop_peak_gb']:.2f} | {r['reconstructor_s']:.1f} | {r['commands_s']:.1f} | "
+              f"{r['products_peak_gb']:.2f} | {r['frames_gb']:.2f} | {r['screens_gb']:.2f} |")
+
+
 if __name__ == "__main__":
-    main(*sys.argv[1:])
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("config", nargs="?", default="config/config.yaml")
+    parser.add_argument("--diameters", type=float, nargs="+", help="telescope diameters [m]: the size benchmark")
+    parser.add_argument("--repeats", type=int, default=REPEATS)
+    parser.add_argument("--stage", nargs="+", help=argparse.SUPPRESS)  # a child process of the size benchmark
+    args = parser.parse_args()
+    if args.stage:
+        stage, config_path, diameter, *rest = args.stage
+        if stage == "products":
+            result = measure_products(config_path, float(diameter), rest[0])
+        else:
+            result = measure_loop(config_path, float(diameter), rest[0], int(rest[1]))
+        print(json.dumps(result))
+    elif args.diameters:
+        main_sizes(args.config, args.diameters, args.repeats)
+    else:
+        main(args.config)

@@ -35,7 +35,7 @@ from luckyao.wfs.beacons import LgsConfig  # noqa: E402
 from luckyao.wfs.centroiders import centroids_rad  # noqa: E402
 from luckyao.wfs.sensor import measure_slopes  # noqa: E402
 
-BASE = load_study(Path(__file__).resolve().parents[1] / "config" / "config.yaml")[0]["base"]
+BASE = load_study(Path(__file__).resolve().parents[1] / "config" / "config.yaml")[1]["noao_r0_13.5cm"]  # the base, resolved
 TELESCOPE = telescope_from(BASE["telescope"])
 PRIOR = tomography_from(BASE["tomography"]).prior  # the study's default system
 NOISE_RAD = tomography_from(BASE["tomography"]).noise_rms_rad

@@ -20,12 +20,12 @@ import pytest
 from test_longexposure import CASE, SPEC
 
 from luckyao.atmosphere.screens import ScreenSet, strip_screen
+from luckyao.lucky.accumulation import batch_mean_error
 from luckyao.lucky.detector import Detector
 from luckyao.lucky.pipeline import run_lucky
 from luckyao.optics.imaging import Imager
 from luckyao.study.case import Case
 from luckyao.study.config import deep_merge
-from luckyao.study.postprocess import batch_mean_error
 from luckyao.study.simulation import simulate
 from luckyao.study.turbulence import TurbulenceSpec, strip_specs
 

@@ -256,3 +256,25 @@ def test_component_and_dilation_kernels_match_scipy():
         assert (count, r0, r1, c0, c1) == (expected.sum(), rows.min(), rows.max(), cols.min(), cols.max())
         dilate(inside, near)
         np.testing.assert_array_equal(near, ndimage.binary_dilation(expected, structure=np.ones((3, 3), bool)))
+
+
+@pytest.mark.parametrize("diameter_m", [2.5, 8.2, 10.4])
+def test_airy_metrics_at_the_sampling_derived_for_each_diameter(diameter_m):
+    """The lucky camera and pupil the study derives for each telescope size (study/scaling.py:
+    obscuration 2/7 D, about 2 pixels per lambda/D at 800 nm over 5", pupil samples of
+    lambda / 5" = 3.3 cm, 76 to 316 across): unit Strehl, and the FWHM and d50 of the
+    obscured Airy pattern (eps = obscuration / D) to the 0.5 % of the pupil's sampled area."""
+    from luckyao.study.scaling import camera_pixels
+
+    obscuration_m = round(2 / 7 * diameter_m, 3)
+    n_pixels = camera_pixels(diameter_m, 800e-9, 5.0, 2.0)
+    imager = Imager(Telescope(diameter_m, obscuration_m), Camera(800e-9, n_pixels, 5.0 / n_pixels))
+    assert imager.oversampling == 1
+    eps = obscuration_m / diameter_m
+    lambda_over_d = 800e-9 / diameter_m / ARCSEC_RAD
+    image = imager.diffraction_limited
+    assert strehl(image, imager.diffraction_limited_peak) == pytest.approx(1.0, abs=1e-6)
+    assert fwhm_arcsec(image, imager.camera.pixel_scale_arcsec) == pytest.approx(
+        2 * airy_half_maximum_x(eps) / np.pi * lambda_over_d, rel=TOLERANCE)
+    assert d50_arcsec(image, imager.camera.pixel_scale_arcsec) == pytest.approx(
+        2 * airy_d50_x(eps) / np.pi * lambda_over_d, rel=TOLERANCE)

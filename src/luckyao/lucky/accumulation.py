@@ -14,6 +14,14 @@ import numpy as np
 from .ranking import criterion_bins, fraction_counts, last_bins
 
 
+def batch_mean_error(values: np.ndarray, n_blocks: int) -> float:
+    """Standard error of the mean of a correlated series from ``n_blocks`` batch means, the
+    blocks of :class:`TimeBlocks` (valid when blocks are longer than the correlation time)."""
+    usable = len(values) // n_blocks * n_blocks
+    means = np.asarray(values[:usable], dtype=float).reshape(n_blocks, -1).mean(axis=1)
+    return float(means.std(ddof=1) / np.sqrt(n_blocks))
+
+
 def recentring_shifts_px(centroids_px: np.ndarray, n_pixels: int) -> np.ndarray:
     """Whole-pixel shifts (..., 2) (y, x) that bring centroids (..., 2) nearest to (n/2, n/2).
 

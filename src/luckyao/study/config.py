@@ -146,6 +146,7 @@ def validate_study(config: dict, schema: dict | None = None) -> dict:
     schema violation of the study, then the first problem of each case and of each
     figure.
     """
+    from .scaling import derive_size_defaults
     from .sweeps import expand_sweeps
 
     schema = schema or load_schema()
@@ -158,6 +159,7 @@ def validate_study(config: dict, schema: dict | None = None) -> dict:
         resolved = deep_merge(config["base"], override)
         try:
             _validate(resolved, case_schema, f"cases.{name}")
+            resolved = derive_size_defaults(resolved, f"cases.{name}")
             _check_case(name, resolved, config["turbulence"])
             n_frames = frame_count(resolved)
             blocks = error_blocks(config["lucky"])
@@ -183,7 +185,8 @@ def _check_figure(fig_id: str, figure: dict, cases: dict, config: dict) -> None:
         if case not in config["cases"]:
             raise ConfigError(f"config key 'figures.{fig_id}.cases': unknown case '{case}'")
     needs = {"quality_vs_fraction": ("criteria",), "quality_vs_distance": ("criteria", "fractions"),
-             "quality_vs_parameter": ("sweep", "criteria", "fractions"), "psf_gallery": ("criteria", "fractions")}
+             "quality_vs_parameter": ("sweep", "criteria", "fractions"), "psf_gallery": ("criteria", "fractions"),
+             "quality_vs_diameter": ("criteria", "fractions")}
     for key in needs.get(figure["kind"], ()):
         if key not in figure:
             raise ConfigError(f"config key 'figures.{fig_id}.{key}': required for {figure['kind']}")
@@ -327,11 +330,16 @@ def sha256(value) -> str:
 
 
 def turbulence_spec(study: dict, case: dict) -> dict:
-    """Everything the shared screens depend on (not r0 or Cn2: those only scale them)."""
+    """Everything the shared screens depend on (not r0 or Cn2: those only scale them); the
+    strips' width across the wind for this case's telescope (``scaling.screen_min_across_m``)."""
+    from .scaling import screen_min_across_m
+
     atm = case["atmosphere"]
+    turbulence = {key: value for key, value in study["turbulence"].items() if key != "min_across_diameters"}
     return {
         "seed": study["seed"],
-        **study["turbulence"],
+        **turbulence,
+        "min_across_m": screen_min_across_m(study["turbulence"], case["telescope"]["diameter_m"]),
         "time_step_s": case["time_step_s"],
         "diameter_m": case["telescope"]["diameter_m"],
         "outer_scale_m": atm["outer_scale_m"],

@@ -12,6 +12,7 @@ import logging
 import numpy as np
 import xarray as xr
 
+from ..lucky.accumulation import batch_mean_error
 from ..lucky.pipeline import ImageReference, run_lucky
 from ..lucky.ranking import ExternalCriterion
 from ..seeds import target_seed
@@ -28,14 +29,6 @@ EXTERNAL_CRITERIA = (
 )
 """Selection criteria from the telemetry (smaller is better), when the case has them; with AO
 also the oracle ``true_rms``, the true corrected tilt-removed rms (a bound, not observable)."""
-
-
-def batch_mean_error(values: np.ndarray, n_blocks: int) -> float:
-    """Standard error of the mean of a correlated series from ``n_blocks`` batch means
-    (valid when blocks are longer than the correlation time)."""
-    usable = len(values) // n_blocks * n_blocks
-    means = np.asarray(values[:usable], dtype=float).reshape(n_blocks, -1).mean(axis=1)
-    return float(means.std(ddof=1) / np.sqrt(n_blocks))
 
 
 def _frames_of(settings: LuckySettings, telemetry: xr.Dataset, target: int, frames_path, screens_path,

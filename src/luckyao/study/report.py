@@ -13,6 +13,9 @@ KINDS = {
                            "the long exposure without recentring.",
     "quality_vs_parameter": "Integrated-image quality vs a swept parameter, a row per selection criterion, a colour "
                             "per value of the sweep's other parameters, a line style per fraction selected.",
+    "quality_vs_diameter": "Integrated-image Strehl ratio and 50%-energy diameter vs the telescope diameter, a row per "
+                           "selection criterion, a colour per AO mode and beacon height, a line style per fraction "
+                           "selected; and the probability of a lucky frame (short-exposure Strehl above a threshold).",
     "quality_vs_signal": "Integrated-image quality vs detected photons per lucky frame (the detector sweep: Poisson "
                          "photon noise and Gaussian read noise), a row per read noise and a column per fraction "
                          "selected; the noiseless detector's value for reference; noise-dominated points (more than "

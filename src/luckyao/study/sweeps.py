@@ -60,6 +60,10 @@ def _nested(path: str, value) -> dict:
 
 
 def _check_path(base: dict, path: str, where: str) -> None:
+    from .scaling import DERIVED_KEYS  # keys a case may leave to the diameter, and their parameters
+
+    if path in DERIVED_KEYS or path in DERIVED_KEYS.values():
+        return
     node = base
     for part in path.split("."):
         if not isinstance(node, dict) or part not in node:

@@ -8,7 +8,7 @@ one colour-blind-safe palette (``style``).
 
 Public objects, by module --
 settings: FigureSettings, CaseSummary; quality: the quality_vs_fraction,
-quality_vs_distance, quality_vs_parameter and comparisons kinds; signal:
+quality_vs_distance, quality_vs_parameter and comparisons kinds; diameter: quality_vs_diameter; signal:
 quality_vs_signal; wavefront: asterism, rms_truth, residuals; tables:
 long_exposure_check, long_exposure_table, long_exposure_markdown, value_with_error;
 gallery: psf_gallery.
@@ -22,6 +22,7 @@ from pathlib import Path
 
 from ..config import sha256
 from ..datasets import open_dataset, provenance, write_dataset
+from .diameter import draw_quality_vs_diameter, quality_vs_diameter_data
 from .gallery import draw_psf_gallery, psf_gallery_data
 from .quality import (comparisons_data, draw_comparisons, draw_quality_vs_distance, draw_quality_vs_fraction,
                       draw_quality_vs_parameter, quality_vs_distance_data, quality_vs_fraction_data,
@@ -39,6 +40,7 @@ FIGURE_KINDS = {
     "rms_truth": (rms_truth_data, draw_rms_truth),
     "quality_vs_fraction": (quality_vs_fraction_data, draw_quality_vs_fraction),
     "quality_vs_parameter": (quality_vs_parameter_data, draw_quality_vs_parameter),
+    "quality_vs_diameter": (quality_vs_diameter_data, draw_quality_vs_diameter),
     "long_exposure_check": (long_exposure_check_data, draw_long_exposure_check),
     "long_exposure_table": (long_exposure_table_data, draw_long_exposure_table),
     "quality_vs_signal": (quality_vs_signal_data, draw_quality_vs_signal),

@@ -70,6 +70,7 @@ class FigureSettings:
     fractions: tuple[float, ...] = ()
     read_noise_e: tuple[float, ...] = ()
     metric: str = "strehl"
+    strehl_thresholds: tuple[float, ...] = field(default_factory=lambda: tuple(figure_default("strehl_thresholds")))
     window_s: float = field(default_factory=lambda: figure_default("window_s"))
     layer_heights_m: tuple[float, ...] = ()
     pairs: tuple = ()
@@ -85,7 +86,7 @@ class FigureSettings:
         unknown = set(settings) - known
         if unknown:
             raise ValueError(f"figure settings: unknown keys {sorted(unknown)}")
-        tuples = {"cases", "criteria", "fractions", "read_noise_e", "layer_heights_m", "pairs"}
+        tuples = {"cases", "criteria", "fractions", "read_noise_e", "layer_heights_m", "pairs", "strehl_thresholds"}
         values = {k: tuple(v) if k in tuples else v for k, v in settings.items()}
         if "sweep_points" in values:
             values["sweep_points"] = tuple((p[0], dict(p[1])) for p in values["sweep_points"])

@@ -1,0 +1,83 @@
+"""The quality_vs_diameter figure: its cases grouped by series and diameter, and the
+probability of a lucky frame with its time-block error, from synthetic lucky datasets."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import xarray as xr
+
+from luckyao.study.config import load_study, validate_study
+from luckyao.study.figures import FIGURE_KINDS, FigureSettings
+
+CONFIG = Path(__file__).resolve().parents[1] / "config"
+N_FRAMES, N_BLOCKS = 100, 5
+
+
+def lucky_dataset(strehl_value: float, frame_strehl: np.ndarray) -> xr.Dataset:
+    """The variables a quality_vs_diameter figure reads from a lucky.nc."""
+    dims = ("target", "criterion", "fraction", "detector")
+    shape = (1, 2, 3, 1)
+    data = {}
+    for metric in ("strehl", "fwhm_arcsec", "d50_arcsec"):
+        data[metric] = (dims, np.full(shape, strehl_value), {"units": "1", "long_name": metric})
+        data[f"{metric}_error"] = (dims, np.full(shape, 0.01), {"units": "1", "long_name": "error"})
+    data["frame_strehl"] = (("target", "detector", "frame"), frame_strehl[None, None, :])
+    data["strehl_block"] = (("block",), np.zeros(N_BLOCKS))
+    return xr.Dataset(data, coords={"criterion": ["strehl", "lgs_rms"], "fraction": [0.01, 0.1, 1.0],
+                                    "detector": ["noiseless"]})
+
+
+@pytest.fixture(scope="module")
+def figure():
+    config, _ = load_study(CONFIG / "config.yaml", CONFIG / "diameter.yaml")
+    cases = validate_study(config)
+    spec = config["figures"]["diameter"]
+    settings = FigureSettings.from_dict({**spec, "case_configs": {c: cases[c] for c in spec["cases"]}})
+    rng = np.random.default_rng(1)
+    frames = [rng.uniform(0, 0.3, N_FRAMES) for _ in spec["cases"]]
+    datasets = [lucky_dataset(k / 10, f) for k, f in enumerate(frames)]
+    make_data, draw = FIGURE_KINDS["quality_vs_diameter"]
+    return spec, frames, make_data(settings, datasets), draw
+
+
+def test_cases_fall_into_series_by_ao_and_beacons(figure):
+    spec, _, ds, _ = figure
+    assert list(ds.diameter.values) == [2.5, 4.2, 8.2]
+    assert list(ds.series.values) == ["no AO", "LTAO, LGS 22 km", "LTAO, LGS 90 km"]
+    assert ds.case.sel(series="LTAO, LGS 90 km", diameter=4.2).item() == "ltao_sodium"
+    assert ds.case.sel(series="no AO", diameter=8.2).item() == "noao_D8.2m"
+    # each point carries its own case's values (case k has Strehl k / 10)
+    for k, case in enumerate(spec["cases"]):
+        where = np.argwhere(ds.case.values == case)[0]
+        assert ds.strehl.values[where[0], where[1], 0, 0] == pytest.approx(k / 10)
+
+
+def test_lucky_frame_probability_and_its_block_error(figure):
+    """The fraction of frames above each threshold, and the spread of its five block values
+    (20 frames each) over sqrt(5)."""
+    spec, frames, ds, _ = figure
+    k = spec["cases"].index("ltao_D8.2m")
+    for threshold in (0.1, 0.2):
+        lucky = frames[k] > threshold
+        blocks = lucky.reshape(N_BLOCKS, -1).mean(axis=1)
+        cell = ds.sel(series="LTAO, LGS 22 km", diameter=8.2, threshold=threshold)
+        assert cell.lucky_probability.item() == pytest.approx(lucky.mean())
+        assert cell.lucky_probability_error.item() == pytest.approx(blocks.std(ddof=1) / np.sqrt(N_BLOCKS))
+
+
+def test_it_draws(figure):
+    _, _, ds, draw = figure
+    fig = draw(ds, "diameter")
+    assert len(fig.axes) == 6
+
+
+def test_two_cases_at_one_point_are_refused():
+    config, _ = load_study(CONFIG / "config.yaml", CONFIG / "diameter.yaml")
+    cases = validate_study(config)
+    names = ["ltao_r0_13.5cm", "ltao_r0_15cm"]  # both LTAO, 22 km, 4.2 m
+    settings = FigureSettings.from_dict({"kind": "quality_vs_diameter", "cases": names, "criteria": ["strehl"],
+                                         "fractions": [0.1], "case_configs": {c: cases[c] for c in names}})
+    datasets = [lucky_dataset(0.1, np.zeros(N_FRAMES)) for _ in names]
+    with pytest.raises(ValueError, match="both LTAO, LGS 22 km at 4.2 m"):
+        FIGURE_KINDS["quality_vs_diameter"][0](settings, datasets)
