@@ -103,6 +103,15 @@ def add_recentred_strehl(ds: xr.Dataset, frame_recentred_strehl: np.ndarray) -> 
              "over its flux and the diffraction-limited peak (their mean is that long exposure's Strehl)"))
 
 
+def add_registration(ds: xr.Dataset, name: str, registered_px: np.ndarray, unregistered: np.ndarray) -> None:
+    """The registration's per-frame positions (detector, frame, axis) and count of frames not registered."""
+    ds["frame_registered_px"] = (("detector", "frame", "axis"), registered_px, _attrs(
+        "pixel", f"position of the frame's image by registration {name} (pixel index; NaN: not registered, "
+                 "not shifted)"))
+    ds["unregistered_frames"] = (("detector",), np.asarray(unregistered, np.int64), _attrs(
+        "1", f"frames registration {name} could not register (no flux or no peak): not shifted, NaN position"))
+
+
 def add_images(ds: xr.Dataset, images: np.ndarray, long_images: np.ndarray, image_crop_px: int | None) -> xr.Dataset:
     """``ds`` with the central ``image_crop_px`` square (None: whole) of the integrated images
     (criterion, fraction, detector, n, n) and the long exposures (recentring, detector, n, n),

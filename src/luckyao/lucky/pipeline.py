@@ -68,11 +68,13 @@ from ..progress import Progress, log
 from ..seeds import detector_key
 from . import kernels
 from .accumulation import PartialSums, TimeBlocks, axis_window, recentring_shifts_px, window_values
-from .dataset import add_block_scores, add_images, add_noiseless_scores, add_recentred_strehl, result_dataset
+from .dataset import (add_block_scores, add_images, add_noiseless_scores, add_recentred_strehl, add_registration,
+                      result_dataset)
 from .detector import Detector, KeyedNoise
 from .guesses import GuessedBins
-from .metrics import EncircledEnergy, score_images
+from .metrics import EncircledEnergy, centroid_from_sums, score_images
 from .ranking import IMAGE_CRITERIA, ExternalCriterion, criterion_bins, fraction_counts
+from .registration import COG, Registration, fourier_shift, shifts_of
 from .scoring import frame_sums, measure_frames, score_partial_sums, value_at_peak
 
 Chunks = Callable[[], Iterable[tuple[int, np.ndarray]]]
@@ -83,7 +85,8 @@ class ImageReference:
     """Per-frame image measurements of another target's detected frames (e.g. the on-axis
     star) that select and recentre a target: ``strehl`` and ``d50_arcsec`` (detector, frame)
     replace the target's own image criteria, ``centroid_px`` (detector, frame, 2) its own
-    centres of gravity for the shifts (same detectors, in the same order)."""
+    registered positions for the shifts (same detectors, in the same order; with ``cog``, the
+    centres of gravity)."""
 
     strehl: np.ndarray
     d50_arcsec: np.ndarray
@@ -91,15 +94,16 @@ class ImageReference:
 
     @classmethod
     def of(cls, result: xr.Dataset) -> "ImageReference":
-        """The reference given by another target's :func:`run_lucky` result."""
-        return cls(result.frame_strehl.values, result.frame_d50_arcsec.values, result.frame_centroid_px.values)
+        """The reference given by another target's :func:`run_lucky` result (of the same registration)."""
+        return cls(result.frame_strehl.values, result.frame_d50_arcsec.values, result.frame_registered_px.values)
 
 
 def run_lucky(iter_chunks: Chunks, n_frames: int, detectors: Sequence[Detector], fractions: Sequence[float],
               diffraction_limited_peak: float, pixel_scale_arcsec: float, seed: int,
               criteria_external: Sequence[ExternalCriterion] = (),
               image_crop_px: int | None = 64, reference: ImageReference | None = None,
-              n_blocks: int = 0, progress_interval_s: float = 5.0) -> xr.Dataset:
+              n_blocks: int = 0, progress_interval_s: float = 5.0,
+              registration: Registration = COG) -> xr.Dataset:
     """Lucky imaging of one frame cube for several detectors, criteria and fractions (module docstring).
 
     ``iter_chunks()`` returns a fresh iterator of ``(start, frames)``: ``frames``
@@ -112,7 +116,12 @@ def run_lucky(iter_chunks: Chunks, n_frames: int, detectors: Sequence[Detector],
     recentring shifts come from it instead of from these frames, whose own per-frame
     Strehl, d50 and centroid are then not computed: ``frame_strehl``,
     ``frame_d50_arcsec`` and ``frame_centroid_px`` are NaN (their flux, the long
-    exposures and ``frame_recentred_strehl`` are computed).
+    exposures and ``frame_recentred_strehl`` are computed). ``registration``
+    (:mod:`.registration`): where each frame is and how it is shifted (default ``cog``, the
+    whole-frame centre of gravity and whole pixels); its positions are
+    ``frame_registered_px`` (detector, frame, axis) (NaN: not registered, not shifted; their
+    count ``unregistered_frames`` (detector)) and, for every method but ``cog``, a frame's d50
+    is about its registered position.
 
     Returns a CF-style :class:`xarray.Dataset`: ``strehl``, ``fwhm_arcsec``,
     ``d50_arcsec`` (criterion, fraction, detector) and the same of the noiseless frames
@@ -130,7 +139,8 @@ def run_lucky(iter_chunks: Chunks, n_frames: int, detectors: Sequence[Detector],
     ``frames_drawn_again`` (per detector): the noisy frames drawn again in pass 2.
     """
     run = _LuckyRun(iter_chunks, n_frames, list(detectors), fractions, diffraction_limited_peak,
-                    pixel_scale_arcsec, seed, list(criteria_external), reference, n_blocks, progress_interval_s)
+                    pixel_scale_arcsec, seed, list(criteria_external), reference, n_blocks, progress_interval_s,
+                    registration)
     run.measure_noiseless()
     run.detect_and_add()
     run.move_guessed_wrong()
@@ -170,16 +180,18 @@ class _ChunkNoise:
 
 
 class _FrameValues:
-    """Per detector and frame: flux, centre of gravity, Strehl, d50 [pixel], recentring shift and
-    the recentred frame's values in the window around the axis."""
+    """Per detector and frame: flux, centre of gravity, registered position, Strehl, d50 [pixel],
+    recentring shift (whole pixels and the sub-pixel remainder) and the recentred frame's values
+    in the window around the axis."""
 
-    def __init__(self, n_det: int, n_frames: int, reference: ImageReference | None):
+    def __init__(self, n_det: int, n_frames: int, reference: ImageReference | None, registration: Registration):
         self.strehl = np.full((n_det, n_frames), np.nan)
         self.d50_px = np.full((n_det, n_frames), np.nan)
         self.centroid = np.full((n_det, n_frames, 2), np.nan)
+        self.registered = np.full((n_det, n_frames, 2), np.nan)
         self.flux = np.full((n_det, n_frames), np.nan)
-        self.reference = reference
-        self.shifts = self.window = self.in_window = None
+        self.reference, self.registration = reference, registration
+        self.shifts = self.remainder = self.window = self.in_window = self.buffer = None
         self.n_pixels = 0
 
     def allocate(self, n_pixels: int) -> None:
@@ -187,8 +199,10 @@ class _FrameValues:
         self.n_pixels = n_pixels
         self.window = axis_window(n_pixels)  # 7 x 7 pixels around the axis
         self.in_window = np.empty((n_det, n_frames, self.window.size), dtype=np.float32)
+        self.remainder = np.zeros((n_det, n_frames, 2))
         if self.reference is not None:
-            self.shifts = recentring_shifts_px(self.reference.centroid_px, n_pixels)
+            self.registered[:] = self.reference.centroid_px
+            self.shifts, self.remainder[:] = shifts_of(self.registered, n_pixels, self.registration.subpixel)
         else:
             self.shifts = np.zeros((n_det, n_frames, 2), dtype=np.int64)
 
@@ -196,12 +210,40 @@ class _FrameValues:
         return self.d50_px * pixel_scale_arcsec
 
     def record(self, i: int, sl: slice, measures: Sequence[np.ndarray]) -> None:
-        """Detector ``i``'s frames ``sl``: their flux and, without a reference, their measures and shifts."""
+        """Detector ``i``'s frames ``sl``: their flux and, without a reference, their measures
+        (:meth:`_LuckyRun._measured`) and shifts."""
         self.flux[i, sl] = measures[0]
         if self.reference is None:
-            centroids, self.strehl[i, sl], self.d50_px[i, sl] = measures[1:]
-            self.centroid[i, sl] = centroids
-            self.shifts[i, sl] = recentring_shifts_px(centroids, self.n_pixels)
+            centroids, self.strehl[i, sl], self.d50_px[i, sl], registered = measures[1:]
+            self.centroid[i, sl], self.registered[i, sl] = centroids, registered
+            if self.registration.subpixel:
+                self.shifts[i, sl], self.remainder[i, sl] = shifts_of(registered, self.n_pixels, True)
+            else:
+                self.shifts[i, sl] = recentring_shifts_px(centroids, self.n_pixels)
+
+    def shifted(self, frames: np.ndarray, i: int, sl: slice, which: np.ndarray | None = None,
+                slot: int = 0) -> np.ndarray:
+        """Frames ``sl`` of detector ``i`` (k, n, n) shifted by their sub-pixel remainders
+        (:func:`.registration.fourier_shift`; the frames themselves when every remainder is 0),
+        those of ``which`` (k,) bool only (the others' values undefined), in buffer ``slot``
+        (0 or 1: valid until that slot's next use)."""
+        remainder = self.remainder[i, sl]
+        moving = np.any(remainder != 0, axis=1)
+        if which is not None:
+            moving &= which
+        if not moving.any():
+            return frames
+        k = len(frames)
+        if self.buffer is None or self.buffer.shape[1] < k:
+            self.buffer = np.empty((2, *frames.shape), np.float32)
+        out = self.buffer[slot, :k]
+        out[~moving] = frames[~moving]
+        out[moving] = fourier_shift(frames[moving], remainder[moving])
+        return out
+
+    def unregistered(self) -> np.ndarray:
+        """Frames (per detector) not registered (no position, no shift): no flux, or no peak."""
+        return np.count_nonzero(~np.isfinite(self.registered).all(axis=2), axis=1)
 
 
 class _LuckyRun:
@@ -210,7 +252,7 @@ class _LuckyRun:
     def __init__(self, iter_chunks: Chunks, n_frames: int, detectors: list[Detector], fractions,
                  diffraction_limited_peak: float, pixel_scale_arcsec: float, seed: int,
                  criteria_external: list[ExternalCriterion], reference: ImageReference | None, n_blocks: int,
-                 progress_interval_s: float):
+                 progress_interval_s: float, registration: Registration):
         self.iter_chunks, self.n_frames, self.detectors, self.fractions = iter_chunks, n_frames, detectors, fractions
         self.peak, self.scale, self.seed = diffraction_limited_peak, pixel_scale_arcsec, seed
         self.criteria_external, self.progress_interval_s = criteria_external, progress_interval_s
@@ -233,7 +275,8 @@ class _LuckyRun:
         self.guessing = bool(self.late) and not all(d.noiseless for d in detectors)
         self.blocks = TimeBlocks(n_frames, n_blocks, fractions, n_det, n_crit)
         self.sums = PartialSums(n_det, n_crit, self.counts, self.blocks, resident=self.late if self.guessing else ())
-        self.frames = _FrameValues(n_det, n_frames, reference)
+        self.registration = registration
+        self.frames = _FrameValues(n_det, n_frames, reference, registration)
         self.noise = _ChunkNoise(detectors)
         self.long_none = self.encircled = self.clean = self.guessed = None
         self.drawn_again = np.zeros(n_det, dtype=np.int64)
@@ -255,10 +298,23 @@ class _LuckyRun:
         self.blocks.assign(self.values, self.larger, crits)
 
     def _measured(self, frames, rows, cols, peak) -> tuple[np.ndarray, ...]:
-        """The frames' measures (:func:`measure_frames`), or with a reference only their flux."""
+        """The frames' measures (:func:`measure_frames` and the registered positions), or with a
+        reference only their flux."""
         if self.frames.reference is not None:
             return (rows.sum(axis=1),)
-        return measure_frames(frames, rows, cols, peak, self.encircled, self.peak)
+        return self._measures(frames, rows, cols, peak)
+
+    def _measures(self, frames, rows, cols, peak) -> tuple[np.ndarray, ...]:
+        """Flux, centre of gravity, Strehl, d50 [pixel] (about the registered position but with
+        ``cog``) and registered position of frames (k, n, n)."""
+        registration = self.registration
+        if not registration.subpixel:
+            measures = measure_frames(frames, rows, cols, peak, self.encircled, self.peak)
+            return (*measures, measures[1])
+        flux = rows.sum(axis=1)
+        registered = registration.positions_px(frames, flux, centroid_from_sums(rows, cols, flux))
+        measures = measure_frames(frames, rows, cols, peak, self.encircled, self.peak, centres_px=registered)
+        return (*measures, registered)
 
     def measure_noiseless(self) -> None:
         """Pass 0 (guessing only): the noiseless frames' measures, the guesses' predictor (and the
@@ -266,9 +322,9 @@ class _LuckyRun:
         if not self.guessing:
             return
         n = self.n_frames
-        clean = tuple(np.full(shape, np.nan) for shape in (n, (n, 2), n, n))
+        clean = tuple(np.full(shape, np.nan) for shape in (n, (n, 2), n, n, (n, 2)))
         for sl, unit in self._chunks("pass 0/2: noiseless frames"):
-            for whole, part in zip(clean, measure_frames(unit, *frame_sums(unit), self.encircled, self.peak)):
+            for whole, part in zip(clean, self._measures(unit, *frame_sums(unit))):
                 whole[sl] = part
         self.clean = clean
         self.guessed = GuessedBins(self.bins.shape, self.counts, self.blocks, {
@@ -298,6 +354,7 @@ class _LuckyRun:
                     frames.record(i, sl, self._measured(unit, *frame_sums(unit)))
                 kernels.add_frames(detected, self.long_none[i])
                 shifts = frames.shifts[i, sl]
+                detected = frames.shifted(detected, i, sl)  # the sub-pixel part of the shifts
                 # the early criteria and the recentred long exposure: shifts known now
                 rows_early = np.concatenate([sums.run_rows(early, self.bins[i, early, sl]),
                                              np.full((k, 1), sums.long_exposure_row)], axis=1)  # (k, early + 1)
@@ -311,8 +368,8 @@ class _LuckyRun:
                 kernels.add_recentred(detected, shifts, np.concatenate(
                     [rows_early, rows_block, rows_guessed, rows_guessed_block], axis=1), sums.detected_rows[i], 1.0)
                 if not detector.noiseless:  # a noiseless detector's noiseless sums are its sums (copied when scoring)
-                    kernels.add_recentred(unit, shifts, np.concatenate([rows_early[:, :-1], rows_guessed], axis=1),
-                                          sums.noiseless_rows[i], 1.0)
+                    kernels.add_recentred(frames.shifted(unit, i, sl, slot=1), shifts, np.concatenate(
+                        [rows_early[:, :-1], rows_guessed], axis=1), sums.noiseless_rows[i], 1.0)
                 window_values(detected, shifts, frames.window, frames.in_window[i, sl])
             self._score_blocks(sl, early)
 
@@ -332,7 +389,7 @@ class _LuckyRun:
                 final_rows = np.concatenate([sums.run_rows(late, self.bins[i, late, sl]),
                                              sums.block_rows(late, sl, self.blocks.bins[i, late, sl])], axis=1)
                 if detector.noiseless:
-                    kernels.add_recentred(unit, shifts, final_rows, sums.detected_rows[i], 1.0)
+                    kernels.add_recentred(frames.shifted(unit, i, sl), shifts, final_rows, sums.detected_rows[i], 1.0)
                     continue
                 guessed_rows = np.concatenate([sums.run_rows(late, guessed.run[i, late, sl]),
                                                sums.block_rows(late, sl, guessed.block[i, late, sl])], axis=1)
@@ -345,8 +402,9 @@ class _LuckyRun:
                 if not np.array_equal(rows[drawn].sum(axis=1), frames.flux[i, sl][drawn]):
                     raise RuntimeError(f"frames {sl.start}.. differ between the two passes")
                 out_of, into = np.where(moved, guessed_rows, -1), np.where(moved, final_rows, -1)
-                for frames_of, partial, m in ((detected, sums.detected_rows[i], moved.shape[1]),
-                                              (unit, sums.noiseless_rows[i], len(late))):
+                for slot, (frames_of, partial, m) in enumerate(((detected, sums.detected_rows[i], moved.shape[1]),
+                                                                (unit, sums.noiseless_rows[i], len(late)))):
+                    frames_of = frames.shifted(frames_of, i, sl, drawn, slot)
                     kernels.add_recentred(frames_of, shifts, out_of[:, :m], partial, -1.0)
                     kernels.add_recentred(frames_of, shifts, into[:, :m], partial, 1.0)
             self._score_blocks(sl, late)
@@ -386,6 +444,7 @@ class _LuckyRun:
         add_noiseless_scores(ds, *noiseless_scores)
         add_block_scores(ds, self.blocks)
         add_recentred_strehl(ds, frame_recentred_strehl)
+        add_registration(ds, self.registration.name, frames.registered, frames.unregistered())
         if image_crop_px != 0:
             ds = add_images(ds, images, long_images, image_crop_px)
         ds.attrs.update(pixel_scale_arcsec=self.scale, diffraction_limited_peak=self.peak, seed=self.seed,

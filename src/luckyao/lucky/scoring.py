@@ -24,15 +24,17 @@ def frame_sums(frames: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 
 def measure_frames(frames: np.ndarray, rows: np.ndarray, cols: np.ndarray, peak: np.ndarray,
-                   encircled: EncircledEnergy, diffraction_limited_peak: float) -> tuple[np.ndarray, ...]:
+                   encircled: EncircledEnergy, diffraction_limited_peak: float,
+                   centres_px: np.ndarray | None = None) -> tuple[np.ndarray, ...]:
     """Flux (k,), centre of gravity (k, 2) (y, x) [pixel], Strehl (k,) and d50 [pixel] (k,) of
     frames (k, n, n) from their row and column sums (k, n) and peaks (k,) (:func:`frame_sums`);
-    NaN where the flux is not positive. The d50 is centred on the centre of gravity
-    (:meth:`EncircledEnergy.radius_px_binned`, the encircled energy summed by radial bins)."""
+    NaN where the flux is not positive. The d50 is centred on ``centres_px`` (k, 2), by default
+    the centre of gravity (:meth:`EncircledEnergy.radius_px_binned`, the encircled energy
+    summed by radial bins); NaN where a centre is not finite."""
     flux = rows.sum(axis=1)
     centroids = centroid_from_sums(rows, cols, flux)
     strehl_ratio = strehl_from(peak, flux, diffraction_limited_peak)
-    radius = encircled.radius_px_binned(frames, centroids, flux=flux)
+    radius = encircled.radius_px_binned(frames, centroids if centres_px is None else centres_px, flux=flux)
     return flux, centroids, strehl_ratio, d50_from_radius(radius, 1.0)
 
 

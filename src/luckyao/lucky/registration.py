@@ -1,0 +1,184 @@
+"""Registration of lucky frames: where each frame's image is, and the shift that recentres it.
+
+A method gives each frame a position ``(y, x)`` [pixel] (pixel centres at integer
+coordinates, index ``[y, x]``); the frame is then shifted by ``n/2 - position`` so that
+position lands on the axis pixel ``(n/2, n/2)``. NaN: the method cannot register the frame
+(``cog``: no positive flux; the others: no positive peak of the filtered frame, or no positive
+flux in ``windowed_cog``'s disc); such a frame is not shifted and is counted.
+
+Methods (:data:`REGISTRATIONS`):
+
+* ``cog``: the centre of gravity of the whole frame, whole-pixel shifts (the study's
+  baseline, as before registration methods were added). Its noise: with ``N`` photons and
+  read noise ``sigma_rn`` over pixels at ``x`` from the centre, ``var = sigma_rn^2 sum x^2 / N^2
+  + sigma_psf^2 / N`` per axis (``sigma_psf^2`` the image's variance): 1.9 px rms at N = 1000
+  and 0.1 e- on 256 x 256 pixels.
+* ``windowed_cog``: the centre of gravity of the frame in a disc of radius
+  :data:`WINDOW_RADIUS_FWHM` core widths about the peak of the matched-filtered frame
+  (the frame convolved with a Gaussian of the diffraction-limited core's FWHM), the disc
+  moved onto the result and the centre of gravity taken again (:data:`WINDOW_ITERATIONS`).
+* ``peak``: the brightest speckle, the peak of the matched-filtered frame (same Gaussian),
+  refined by a parabola through it and its neighbours along each axis.
+* ``xcorr``: the peak of the cross-correlation with the diffraction-limited PSF (rings and
+  central obscuration included), refined by the same parabola. The reference is the
+  diffraction-limited PSF, not the integrated image of the frames seen so far: it is free
+  of noise and fixed, so a frame's noise does not feed back into the reference (a running
+  shift-and-add reference would collect each frame's noise peak on the axis and bias the
+  Strehl up), and it is the matched filter of the diffraction-limited speckle that the
+  selected frames hold.
+
+The sub-pixel methods' shifts are split into a whole-pixel part (applied as ``np.roll``,
+by :func:`.kernels.add_recentred`) and a remainder in [-1/2, 1/2) applied as a Fourier
+shift (:func:`fourier_shift`): it conserves the flux, and a whole-pixel shift gives
+exactly the roll (the remainder is then zero and the frame untouched).
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.fft
+
+from .accumulation import recentring_shifts_px
+
+REGISTRATIONS = ("cog", "windowed_cog", "peak", "xcorr")
+"""The registration methods, ``cog`` (the baseline) first."""
+
+WINDOW_RADIUS_FWHM = 2.0
+"""Radius of ``windowed_cog``'s disc [diffraction-limited core FWHM]: the core and the first ring."""
+
+WINDOW_ITERATIONS = 2
+"""Centres of gravity ``windowed_cog`` takes, each in the disc about the previous position."""
+
+
+def gaussian_kernel(n_pixels: int, fwhm_px: float) -> np.ndarray:
+    """Unit-sum Gaussian (n, n) of FWHM ``fwhm_px`` centred on pixel (0, 0) (periodic)."""
+    d = np.fft.fftfreq(n_pixels, 1.0 / n_pixels)
+    sigma = fwhm_px / (2 * np.sqrt(2 * np.log(2)))
+    g = np.exp(-0.5 * (d / sigma) ** 2)
+    kernel = g[:, None] * g[None, :]
+    return kernel / kernel.sum()
+
+
+def fourier_shift(frames: np.ndarray, shifts_px: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+    """Frames (k, n, n) shifted by ``shifts_px`` (k, 2) (y, x) [pixel], periodic:
+    ``out(r) = frame(r - s)`` for the band-limited frame, by the phase ramp
+    ``exp(-2 pi i k.s / n)`` on its real FFT. Conserves the flux (the zero frequency is
+    untouched); a whole-pixel shift equals ``np.roll`` to float rounding. float32 out."""
+    frames = np.asarray(frames, dtype=np.float32)
+    k, n, _ = frames.shape
+    spectrum = scipy.fft.rfft2(frames, workers=1)
+    ky = np.fft.fftfreq(n).astype(np.float32)
+    kx = np.fft.rfftfreq(n).astype(np.float32)
+    s = np.asarray(shifts_px, dtype=np.float32)
+    ramp = np.exp(-2j * np.pi * (ky[None, :, None] * s[:, 0, None, None] + kx[None, None, :] * s[:, 1, None, None]))
+    shifted = scipy.fft.irfft2(spectrum * ramp.astype(np.complex64), s=(n, n), workers=1)
+    if out is None:
+        return shifted.astype(np.float32)
+    out[...] = shifted
+    return out
+
+
+def parabola_offset(below: np.ndarray, at: np.ndarray, above: np.ndarray) -> np.ndarray:
+    """Vertex offset in [-1/2, 1/2] of the parabola through ``(-1, below), (0, at), (1, above)``:
+    ``(below - above) / (2 (below - 2 at + above))``, 0 where that curvature is not negative."""
+    curvature = below - 2 * at + above
+    with np.errstate(invalid="ignore", divide="ignore"):
+        offset = np.where(curvature < 0, 0.5 * (below - above) / curvature, 0.0)
+    return np.clip(offset, -0.5, 0.5)
+
+
+@dataclass(frozen=True, eq=False)
+class Registration:
+    """A registration method (:data:`REGISTRATIONS`) for frames of ``n_pixels`` square.
+
+    ``diffraction_limited`` (n, n): the unit-flux diffraction-limited image, peak on
+    (n/2, n/2) (``Imager.diffraction_limited``; ``xcorr``'s reference); ``core_fwhm_px``:
+    the FWHM of its core [pixel] (the matched filter of ``windowed_cog`` and ``peak``).
+    """
+
+    name: str
+    diffraction_limited: np.ndarray | None = None
+    core_fwhm_px: float = 0.0
+
+    def __post_init__(self):
+        if self.name not in REGISTRATIONS:
+            raise ValueError(f"registration {self.name!r}: must be one of {REGISTRATIONS}")
+        if self.name != "cog" and (self.diffraction_limited is None or not self.core_fwhm_px > 0):
+            raise ValueError(f"registration {self.name!r} needs the diffraction-limited image and core FWHM")
+        if self.name != "cog":
+            n = self.diffraction_limited.shape[-1]
+            if self.name == "xcorr":  # correlation with the reference: its conjugate spectrum, axis at 0
+                reference = np.roll(self.diffraction_limited, (-(n // 2), -(n // 2)), axis=(0, 1))
+                kernel_ft = np.conj(scipy.fft.rfft2(reference / reference.sum()))
+            else:
+                kernel_ft = scipy.fft.rfft2(gaussian_kernel(n, self.core_fwhm_px))
+            object.__setattr__(self, "_kernel_ft", kernel_ft.astype(np.complex64))
+
+    @property
+    def subpixel(self) -> bool:
+        """Whether the shifts have a sub-pixel part (every method but ``cog``)."""
+        return self.name != "cog"
+
+    def filtered(self, frames: np.ndarray) -> np.ndarray:
+        """The frames (k, n, n) correlated with the method's kernel (float32)."""
+        n = frames.shape[-1]
+        return scipy.fft.irfft2(scipy.fft.rfft2(np.asarray(frames, np.float32), workers=1) * self._kernel_ft,
+                                s=(n, n), workers=1)
+
+    def positions_px(self, frames: np.ndarray, flux: np.ndarray, centroids_px: np.ndarray) -> np.ndarray:
+        """Positions (k, 2) (y, x) [pixel] of frames (k, n, n) of ``flux`` (k,) and centres of
+        gravity ``centroids_px`` (k, 2); NaN where the method cannot register a frame."""
+        if self.name == "cog":
+            return np.asarray(centroids_px, dtype=np.float64)
+        filtered = self.filtered(frames)
+        k, n, _ = filtered.shape
+        flat = filtered.reshape(k, -1)
+        best = np.argmax(flat, axis=1)
+        iy, ix = best // n, best % n
+        j = np.arange(k)
+        ok = flat[j, best] > 0  # a peak (a noisy frame's total flux may be negative and its peak still clear)
+        if self.name == "windowed_cog":
+            position = self._windowed_cog(frames, np.stack([iy, ix], axis=1).astype(np.float64))
+        else:
+            dy = parabola_offset(filtered[j, (iy - 1) % n, ix], filtered[j, iy, ix], filtered[j, (iy + 1) % n, ix])
+            dx = parabola_offset(filtered[j, iy, (ix - 1) % n], filtered[j, iy, ix], filtered[j, iy, (ix + 1) % n])
+            position = np.stack([iy + dy, ix + dx], axis=1).astype(np.float64)
+        return np.where(ok[:, None] & np.isfinite(position), position, np.nan)
+
+    def _windowed_cog(self, frames: np.ndarray, start_px: np.ndarray) -> np.ndarray:
+        """Centres of gravity (k, 2) of frames in discs about ``start_px`` (module docstring);
+        NaN where a disc holds no positive flux."""
+        k, n, _ = frames.shape
+        radius = WINDOW_RADIUS_FWHM * self.core_fwhm_px
+        half = int(np.ceil(radius)) + 1
+        d = np.arange(-half, half + 1)
+        position = start_px.copy()
+        j = np.arange(k)[:, None, None]
+        for _ in range(WINDOW_ITERATIONS):
+            centre = np.floor(position + 0.5)
+            ok = np.isfinite(centre).all(axis=1)
+            centre = np.where(ok[:, None], centre, 0).astype(np.int64)
+            py, px = centre[:, 0, None, None] + d[None, :, None], centre[:, 1, None, None] + d[None, None, :]
+            y, x = py.astype(np.float64), np.broadcast_to(px, (k, len(d), len(d))).astype(np.float64)
+            inside = (y - position[:, 0, None, None]) ** 2 + (x - position[:, 1, None, None]) ** 2 <= radius ** 2
+            values = np.where(inside, frames[j, py % n, px % n], 0.0).astype(np.float64)
+            total = values.sum(axis=(1, 2))
+            with np.errstate(invalid="ignore", divide="ignore"):
+                new = np.stack([(values * y).sum(axis=(1, 2)), (values * x).sum(axis=(1, 2))], axis=1) / total[:, None]
+            position = np.where((ok & (total > 0))[:, None], new, np.nan)
+        return position
+
+
+COG = Registration("cog")
+"""The baseline: whole-frame centre of gravity, whole-pixel shifts."""
+
+
+def shifts_of(positions_px: np.ndarray, n_pixels: int, subpixel: bool) -> tuple[np.ndarray, np.ndarray]:
+    """The shifts that bring ``positions_px`` (..., 2) to the axis pixel (n/2, n/2): whole pixels
+    (..., 2) int64 ``floor(n/2 - p + 1/2)`` and, if ``subpixel``, the remainder (..., 2) in
+    (-1/2, 1/2] (else 0); no shift where a position is not finite."""
+    positions = np.asarray(positions_px, dtype=np.float64)
+    whole = recentring_shifts_px(positions, n_pixels)
+    if not subpixel:
+        return whole, np.zeros(whole.shape)
+    return whole, np.where(np.isfinite(positions), n_pixels // 2 - positions - whole, 0.0)

@@ -1,0 +1,167 @@
+"""Registration methods against theory: shifts, noise of the centre of gravity, sub-pixel positions."""
+
+from functools import lru_cache
+
+import numpy as np
+import pytest
+import scipy.fft
+
+from luckyao.lucky.detector import Detector, KeyedNoise
+from luckyao.lucky.metrics import centroid_px
+from luckyao.lucky.registration import REGISTRATIONS, WINDOW_RADIUS_FWHM, Registration, fourier_shift, shifts_of
+from luckyao.optics.imaging import Camera, Imager
+from luckyao.optics.pupil import Telescope
+
+N = 64
+SCALE_ARCSEC = 5 / 256  # the study's camera: 800 nm, 4.2 m (1.2 m obscuration), lambda/D = 2.0 px
+
+
+@lru_cache
+def airy(n_pixels: int = N) -> tuple[np.ndarray, float]:
+    """The obscured telescope's unit-flux diffraction-limited image (n, n), peak on (n/2, n/2),
+    and lambda/D [pixel]."""
+    camera = Camera(800e-9, n_pixels, SCALE_ARCSEC)
+    image = Imager(Telescope(4.2, 1.2), camera).diffraction_limited
+    return image / image.sum(), camera.wavelength_m / 4.2 / camera.pixel_scale_rad
+
+
+def registration(name: str, n_pixels: int = N) -> Registration:
+    image, core_px = airy(n_pixels)
+    return Registration(name, image, core_px)
+
+
+def test_fourier_shift_conserves_flux_and_is_the_roll_for_whole_pixels():
+    rng = np.random.default_rng(1)
+    frames = rng.random((3, 32, 32)).astype(np.float32)
+    whole = np.array([[3, -5], [0, 0], [-17, 31]])
+    shifted = fourier_shift(frames, whole)
+    for frame, s, out in zip(frames, whole, shifted):
+        np.testing.assert_allclose(out, np.roll(frame, tuple(s), axis=(0, 1)), atol=1e-5)
+    sub = fourier_shift(frames, np.array([[0.3, -0.45], [0.5, 0.5], [-0.1, 0.2]]))
+    np.testing.assert_allclose(sub.sum(axis=(1, 2)), frames.sum(axis=(1, 2)), rtol=1e-5)
+    # shifting by s then -s returns the frame (the Nyquist terms aside: a band-limited frame)
+    band_limited = fourier_shift(airy()[0][None].astype(np.float32), np.array([[0.0, 0.0]]))
+    back = fourier_shift(fourier_shift(band_limited, np.array([[0.37, -0.21]])), np.array([[-0.37, 0.21]]))
+    np.testing.assert_allclose(back, band_limited, atol=1e-6 * band_limited.max())
+
+
+def test_shifts_split_into_whole_pixels_and_a_remainder_exactly_today_for_cog():
+    positions = np.array([[10.2, 40.5], [32.0, 31.5], [np.nan, np.nan], [33.49, 0.51]])
+    whole, rest = shifts_of(positions, N, subpixel=True)
+    finite = np.isfinite(positions).all(axis=1)
+    np.testing.assert_allclose((whole + rest)[finite], (N // 2 - positions)[finite], atol=1e-12)
+    assert np.all(np.abs(rest) <= 0.5) and np.all(whole[~finite] == 0) and np.all(rest[~finite] == 0)
+    whole_only, none = shifts_of(positions, N, subpixel=False)
+    np.testing.assert_array_equal(whole_only, whole)
+    assert not none.any()
+
+
+@pytest.mark.parametrize("name", REGISTRATIONS)
+def test_each_method_recovers_a_subpixel_shift_of_a_noiseless_obscured_airy(name):
+    """< 0.05 px for every method (the issue's requirement), at several sub-pixel offsets, on the
+    study's 256-pixel frame (the full-frame centre of gravity needs it: the Airy halo's wrapped
+    far wings move it by ~3 % of the shift on 64 pixels)."""
+    n = 256
+    image = airy(n)[0].astype(np.float32)
+    shifts = np.array([[0.3, -0.27], [3.45, -5.1], [-0.5, 0.12], [1.0, 2.0]])
+    frames = fourier_shift(np.broadcast_to(image, (len(shifts), n, n)), shifts)
+    flux = frames.sum(axis=(1, 2), dtype=np.float64)
+    found = registration(name, n).positions_px(frames, flux, centroid_px(frames))
+    np.testing.assert_allclose(found, n // 2 + shifts, atol=0.05)
+
+
+def detected(unit: np.ndarray, photons: float, read_noise_e: float, k: int, seed: int = 7) -> np.ndarray:
+    """k detected frames of the unit-flux image ``unit`` (the study's detector, independent draws)."""
+    frames = np.broadcast_to(unit.astype(np.float32), (k, *unit.shape))
+    noise = KeyedNoise(unit.shape[-1], k)
+    out, *_ = noise.prepare(frames).detect(Detector(f"rn{read_noise_e}_{photons}", photons, read_noise_e), seed, 0)
+    return out
+
+
+@pytest.mark.parametrize("photons, read_noise_e", [(2000.0, 0.5), (300.0, 0.0)])
+def test_centre_of_gravity_noise_variance_against_theory(photons, read_noise_e):
+    """Full-frame centre of gravity of a Gaussian spot (sigma_psf) with N photons and read noise
+    sigma_rn: var = sigma_rn^2 sum_pixels x^2 / N^2 + sigma_psf^2 / N per axis (x from the spot),
+    the Monte-Carlo variance within 5 standard errors (2 var^2 / (M - 1), Gaussian estimates)."""
+    sigma_psf, m = 2.5, 3000
+    y, x = np.indices((N, N)) - N // 2
+    unit = np.exp(-0.5 * (x**2 + y**2) / sigma_psf**2)
+    unit /= unit.sum()
+    sum_x2 = float((x**2).sum())
+    expected = read_noise_e**2 * sum_x2 / photons**2 + sigma_psf**2 / photons
+    centres = centroid_px(detected(unit, photons, read_noise_e, m))
+    for axis in (0, 1):
+        assert np.var(centres[:, axis] - N // 2, ddof=0) == pytest.approx(
+            expected, abs=5 * expected * np.sqrt(2 / (m - 1)))
+
+
+def linear_weights(reg: Registration, at: tuple[int, int]) -> np.ndarray:
+    """Weights w (N, N) of the filtered frame's value at pixel ``at``: filtered(at) = sum_q w(q) frame(q)."""
+    delta = np.zeros((N, N), np.float32)
+    delta[at] = 1.0
+    return scipy.fft.irfft2(scipy.fft.rfft2(delta) * np.conj(reg._kernel_ft), s=(N, N))
+
+
+def cramer_rao_px(image: np.ndarray, photons: float, read_noise_e: float) -> float:
+    """Cramer-Rao bound [pixel] of a position along x from one frame of N photons (Poisson) and
+    read noise: 1 / sqrt(sum (N dI/dx)^2 / (N I + sigma^2)), dI/dx the band-limited image's
+    exact (Fourier) derivative."""
+    kx = np.fft.fftfreq(N)[None, :]
+    gradient = np.real(np.fft.ifft2(2j * np.pi * kx * np.fft.fft2(image)))
+    return float(1 / np.sqrt(((photons * gradient) ** 2 / (photons * image + read_noise_e**2)).sum()))
+
+
+def expected_error_px(name: str, image: np.ndarray, photons: float, read_noise_e: float) -> float:
+    """First-order (linear propagation) rms error [pixel] along x of a method, the spot on the axis,
+    pixel variance N I + sigma^2: ``peak``/``xcorr``, the parabola's vertex
+    (f- - f+) / (2 (f- - 2 f0 + f+)) of the filtered frame; ``windowed_cog``, the centre of gravity
+    in the disc fixed on the spot, sqrt(sum_W x^2 var) / (N sum_W I)."""
+    variance = photons * image + read_noise_e**2
+    reg = registration(name)
+    c = N // 2
+    if name == "windowed_cog":
+        y, x = np.indices((N, N)) - c
+        disc = x**2 + y**2 <= (WINDOW_RADIUS_FWHM * reg.core_fwhm_px) ** 2
+        return float(np.sqrt((x[disc] ** 2 * variance[disc]).sum()) / (photons * image[disc].sum()))
+    below, at, above = (linear_weights(reg, (c, c + d)) for d in (-1, 0, 1))
+    curvature = sum(w * (photons * image) for w in (below, -2 * at, above)).sum()
+    return float(np.sqrt(((below - above) ** 2 * variance).sum()) / (2 * abs(curvature)))
+
+
+@pytest.mark.parametrize("name, photons, read_noise_e, above_first_order", [
+    ("peak", 300.0, 0.1, 1.0), ("xcorr", 300.0, 0.1, 1.0), ("xcorr", 1000.0, 1.0, 1.0),
+    ("windowed_cog", 300.0, 0.1, 1.5)])
+def test_noisy_positions_have_their_expected_error(name, photons, read_noise_e, above_first_order):
+    """A noisy obscured Airy pattern on the axis (signal-to-noise high enough for the first order to
+    hold: at 100 photons and 1 e- the ratio of noisy sums adds ~10 %): each method's rms error per axis equals its
+    first-order error (:func:`expected_error_px`) within 5 standard errors of the sample rms
+    (from the squared errors' spread) - ``windowed_cog`` up to 1.5 times it, its disc moving with the noisy
+    position (pixels at its edge enter and leave) - and is never below the Cramer-Rao bound; the
+    full-frame ``cog`` of the same frames has sigma_rn sqrt(sum x^2) / N, far above."""
+    image = airy()[0]
+    m = 400
+    frames = detected(image, photons, read_noise_e, m)
+    flux = frames.sum(axis=(1, 2), dtype=np.float64)
+    found = registration(name).positions_px(frames, flux, centroid_px(frames))
+    assert np.isfinite(found).all()
+    squared = (found - N // 2) ** 2
+    rms = np.sqrt(squared.mean(axis=0))
+    rms_error = squared.std(axis=0) / (2 * rms * np.sqrt(m))  # standard error of the sample rms (delta method)
+    expected = expected_error_px(name, image, photons, read_noise_e)
+    assert np.all(rms > expected - 5 * rms_error) and np.all(rms < above_first_order * expected + 5 * rms_error), (
+        rms, rms_error, expected)
+    assert np.all(rms > 0.95 * cramer_rao_px(image, photons, read_noise_e))
+
+
+@pytest.mark.parametrize("name", REGISTRATIONS[1:])
+def test_a_frame_without_flux_or_peak_is_not_registered(name):
+    frames = np.zeros((2, N, N), np.float32)
+    frames[1] = -1.0  # read noise only, all negative: no peak
+    flux = frames.sum(axis=(1, 2), dtype=np.float64)
+    found = registration(name).positions_px(frames, flux, centroid_px(frames))
+    assert np.isnan(found).all()
+
+
+def test_an_unknown_method_is_refused_by_name():
+    with pytest.raises(ValueError, match="registration 'brightest'"):
+        Registration("brightest")
