@@ -42,7 +42,13 @@ def result_dataset(detectors, criteria, criteria_external, fractions, counts, n_
         "photons_per_frame": ("detector", np.array(photons, np.float64),
                               _attrs("photon", "detected photons per frame (NaN: noiseless)")),
         "read_noise_e": ("detector", np.array([d.read_noise_e for d in detectors], np.float64),
-                         _attrs("electron", "read noise rms per pixel")),
+                         _attrs("electron", "read noise rms per pixel (EMCCD: referred to the input)")),
+        "electron_multiplying": ("detector", np.array([d.electron_multiplying for d in detectors], np.int8),
+                                 _attrs("1", "EMCCD gain register (Gamma-distributed gain, excess-noise factor "
+                                             "sqrt 2)")),
+        "photon_counting_threshold_e": ("detector", np.array(
+            [np.nan if d.photon_counting_threshold_e is None else d.photon_counting_threshold_e
+             for d in detectors], np.float64), _attrs("electron", "photon-counting threshold (NaN: none)")),
         "recentring": ("recentring", ["none", "cog"],
                        _attrs("1", "recentring of the long exposure: none or centre of gravity")),
         "frame": ("frame", np.arange(n_frames), _attrs("1", "frame index")),

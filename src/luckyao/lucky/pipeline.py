@@ -75,7 +75,7 @@ from .guesses import GuessedBins
 from .metrics import EncircledEnergy, centroid_from_sums, score_images
 from .ranking import IMAGE_CRITERIA, ExternalCriterion, criterion_bins, fraction_counts
 from .registration import COG, Registration, fourier_shift, shifts_of
-from .scoring import frame_sums, measure_frames, score_partial_sums, value_at_peak
+from .scoring import MatchedStrehl, frame_sums, measure_frames, score_partial_sums, value_at_peak
 
 Chunks = Callable[[], Iterable[tuple[int, np.ndarray]]]
 
@@ -103,7 +103,7 @@ def run_lucky(iter_chunks: Chunks, n_frames: int, detectors: Sequence[Detector],
               criteria_external: Sequence[ExternalCriterion] = (),
               image_crop_px: int | None = 64, reference: ImageReference | None = None,
               n_blocks: int = 0, progress_interval_s: float = 5.0,
-              registration: Registration = COG) -> xr.Dataset:
+              registration: Registration = COG, matched_strehl: MatchedStrehl | None = None) -> xr.Dataset:
     """Lucky imaging of one frame cube for several detectors, criteria and fractions (module docstring).
 
     ``iter_chunks()`` returns a fresh iterator of ``(start, frames)``: ``frames``
@@ -121,7 +121,8 @@ def run_lucky(iter_chunks: Chunks, n_frames: int, detectors: Sequence[Detector],
     whole-frame centre of gravity and whole pixels); its positions are
     ``frame_registered_px`` (detector, frame, axis) (NaN: not registered, not shifted; their
     count ``unregistered_frames`` (detector)) and, for every method but ``cog``, a frame's d50
-    is about its registered position.
+    is about its registered position. With ``matched_strehl`` (:class:`.scoring.MatchedStrehl`),
+    a frame's Strehl (its criterion) is that of its matched-filtered peak, not of its brightest pixel.
 
     Returns a CF-style :class:`xarray.Dataset`: ``strehl``, ``fwhm_arcsec``,
     ``d50_arcsec`` (criterion, fraction, detector) and the same of the noiseless frames
@@ -140,7 +141,7 @@ def run_lucky(iter_chunks: Chunks, n_frames: int, detectors: Sequence[Detector],
     """
     run = _LuckyRun(iter_chunks, n_frames, list(detectors), fractions, diffraction_limited_peak,
                     pixel_scale_arcsec, seed, list(criteria_external), reference, n_blocks, progress_interval_s,
-                    registration)
+                    registration, matched_strehl)
     run.measure_noiseless()
     run.detect_and_add()
     run.move_guessed_wrong()
@@ -252,7 +253,7 @@ class _LuckyRun:
     def __init__(self, iter_chunks: Chunks, n_frames: int, detectors: list[Detector], fractions,
                  diffraction_limited_peak: float, pixel_scale_arcsec: float, seed: int,
                  criteria_external: list[ExternalCriterion], reference: ImageReference | None, n_blocks: int,
-                 progress_interval_s: float, registration: Registration):
+                 progress_interval_s: float, registration: Registration, matched_strehl: MatchedStrehl | None):
         self.iter_chunks, self.n_frames, self.detectors, self.fractions = iter_chunks, n_frames, detectors, fractions
         self.peak, self.scale, self.seed = diffraction_limited_peak, pixel_scale_arcsec, seed
         self.criteria_external, self.progress_interval_s = criteria_external, progress_interval_s
@@ -275,7 +276,7 @@ class _LuckyRun:
         self.guessing = bool(self.late) and not all(d.noiseless for d in detectors)
         self.blocks = TimeBlocks(n_frames, n_blocks, fractions, n_det, n_crit)
         self.sums = PartialSums(n_det, n_crit, self.counts, self.blocks, resident=self.late if self.guessing else ())
-        self.registration = registration
+        self.registration, self.matched_strehl = registration, matched_strehl
         self.frames = _FrameValues(n_det, n_frames, reference, registration)
         self.noise = _ChunkNoise(detectors)
         self.long_none = self.encircled = self.clean = self.guessed = None
@@ -305,15 +306,18 @@ class _LuckyRun:
         return self._measures(frames, rows, cols, peak)
 
     def _measures(self, frames, rows, cols, peak) -> tuple[np.ndarray, ...]:
-        """Flux, centre of gravity, Strehl, d50 [pixel] (about the registered position but with
-        ``cog``) and registered position of frames (k, n, n)."""
+        """Flux, centre of gravity, Strehl (of the brightest pixel, or matched-filtered), d50 [pixel]
+        (about the registered position but with ``cog``) and registered position of frames (k, n, n)."""
         registration = self.registration
         if not registration.subpixel:
             measures = measure_frames(frames, rows, cols, peak, self.encircled, self.peak)
-            return (*measures, measures[1])
-        flux = rows.sum(axis=1)
-        registered = registration.positions_px(frames, flux, centroid_from_sums(rows, cols, flux))
-        measures = measure_frames(frames, rows, cols, peak, self.encircled, self.peak, centres_px=registered)
+            registered = measures[1]
+        else:
+            flux = rows.sum(axis=1)
+            registered = registration.positions_px(frames, flux, centroid_from_sums(rows, cols, flux))
+            measures = measure_frames(frames, rows, cols, peak, self.encircled, self.peak, centres_px=registered)
+        if self.matched_strehl is not None:
+            measures = (measures[0], measures[1], self.matched_strehl(frames, measures[0]), measures[3])
         return (*measures, registered)
 
     def measure_noiseless(self) -> None:

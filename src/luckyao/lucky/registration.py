@@ -34,8 +34,10 @@ exactly the roll (the remainder is then zero and the frame untouched).
 """
 
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
+import pyfftw
 import scipy.fft
 
 from .accumulation import recentring_shifts_px
@@ -59,22 +61,51 @@ def gaussian_kernel(n_pixels: int, fwhm_px: float) -> np.ndarray:
     return kernel / kernel.sum()
 
 
+class _Transforms:
+    """FFTW's real 2-D transforms of one n x n float32 frame, both ways (FFTW_ESTIMATE: chosen
+    without timing, so the rounding is the same in every process). Not thread-safe."""
+
+    def __init__(self, n: int):
+        self.frame = pyfftw.empty_aligned((n, n), dtype=np.float32)
+        self.spectrum = pyfftw.empty_aligned((n, n // 2 + 1), dtype=np.complex64)
+        self.forward = pyfftw.FFTW(self.frame, self.spectrum, axes=(0, 1), flags=("FFTW_ESTIMATE",), threads=1)
+        self.backward = pyfftw.FFTW(self.spectrum, self.frame, axes=(0, 1), direction="FFTW_BACKWARD",
+                                    flags=("FFTW_ESTIMATE", "FFTW_DESTROY_INPUT"), threads=1)
+        self.ky, self.kx = np.fft.fftfreq(n), np.fft.rfftfreq(n)
+
+    def filter(self, frame: np.ndarray, kernel_ft: np.ndarray, out: np.ndarray) -> None:
+        """``out`` = the periodic convolution of ``frame`` with the kernel of spectrum ``kernel_ft``."""
+        self.frame[:] = frame
+        self.forward()
+        self.spectrum *= kernel_ft
+        self.backward()  # normalised by FFTW's interface (1 / n^2)
+        out[:] = self.frame
+
+    def shift(self, frame: np.ndarray, shift_px: np.ndarray, out: np.ndarray) -> None:
+        """``out`` = ``frame`` shifted by ``shift_px`` (y, x): its spectrum times the separable ramp."""
+        self.frame[:] = frame
+        self.forward()
+        self.spectrum *= np.exp(-2j * np.pi * self.ky * shift_px[0]).astype(np.complex64)[:, None]
+        self.spectrum *= np.exp(-2j * np.pi * self.kx * shift_px[1]).astype(np.complex64)[None, :]
+        self.backward()
+        out[:] = self.frame
+
+
+@lru_cache(maxsize=4)
+def _transforms(n: int) -> _Transforms:
+    return _Transforms(n)
+
+
 def fourier_shift(frames: np.ndarray, shifts_px: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
     """Frames (k, n, n) shifted by ``shifts_px`` (k, 2) (y, x) [pixel], periodic:
     ``out(r) = frame(r - s)`` for the band-limited frame, by the phase ramp
-    ``exp(-2 pi i k.s / n)`` on its real FFT. Conserves the flux (the zero frequency is
-    untouched); a whole-pixel shift equals ``np.roll`` to float rounding. float32 out."""
+    ``exp(-2 pi i k.s / n)`` on its real FFT (FFTW, float32). Conserves the flux (the zero
+    frequency is untouched); a whole-pixel shift equals ``np.roll`` to float rounding."""
     frames = np.asarray(frames, dtype=np.float32)
-    k, n, _ = frames.shape
-    spectrum = scipy.fft.rfft2(frames, workers=1)
-    ky = np.fft.fftfreq(n).astype(np.float32)
-    kx = np.fft.rfftfreq(n).astype(np.float32)
-    s = np.asarray(shifts_px, dtype=np.float32)
-    ramp = np.exp(-2j * np.pi * (ky[None, :, None] * s[:, 0, None, None] + kx[None, None, :] * s[:, 1, None, None]))
-    shifted = scipy.fft.irfft2(spectrum * ramp.astype(np.complex64), s=(n, n), workers=1)
-    if out is None:
-        return shifted.astype(np.float32)
-    out[...] = shifted
+    out = np.empty(frames.shape, np.float32) if out is None else out
+    transforms = _transforms(frames.shape[-1])
+    for frame, s, moved in zip(frames, np.asarray(shifts_px, dtype=np.float64), out):
+        transforms.shift(frame, s, moved)
     return out
 
 
@@ -121,9 +152,11 @@ class Registration:
 
     def filtered(self, frames: np.ndarray) -> np.ndarray:
         """The frames (k, n, n) correlated with the method's kernel (float32)."""
-        n = frames.shape[-1]
-        return scipy.fft.irfft2(scipy.fft.rfft2(np.asarray(frames, np.float32), workers=1) * self._kernel_ft,
-                                s=(n, n), workers=1)
+        out = np.empty(frames.shape, np.float32)
+        transforms = _transforms(frames.shape[-1])
+        for frame, result in zip(frames, out):
+            transforms.filter(frame, self._kernel_ft, result)
+        return out
 
     def positions_px(self, frames: np.ndarray, flux: np.ndarray, centroids_px: np.ndarray) -> np.ndarray:
         """Positions (k, 2) (y, x) [pixel] of frames (k, n, n) of ``flux`` (k,) and centres of

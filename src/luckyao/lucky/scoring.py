@@ -7,6 +7,8 @@ to the partial sums of :class:`.accumulation.PartialSums` (:func:`integrated_ima
 (:func:`value_at_peak`).
 """
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from . import kernels
@@ -36,6 +38,34 @@ def measure_frames(frames: np.ndarray, rows: np.ndarray, cols: np.ndarray, peak:
     strehl_ratio = strehl_from(peak, flux, diffraction_limited_peak)
     radius = encircled.radius_px_binned(frames, centroids if centres_px is None else centres_px, flux=flux)
     return flux, centroids, strehl_ratio, d50_from_radius(radius, 1.0)
+
+
+@dataclass(frozen=True, eq=False)
+class MatchedStrehl:
+    """A frame's Strehl from its matched-filtered peak (``lucky.frame_strehl: matched_filter``):
+    ``S = max(K * frame) / (F max(K * I_dl))``, ``K`` the Gaussian of the diffraction-limited
+    core's FWHM (:class:`.registration.Registration` ``peak``'s filter), ``I_dl`` the unit-flux
+    diffraction-limited image, ``F`` the frame's flux. The filter averages the read and photon
+    noise over the core, so the bias of the single brightest pixel of a noisy frame (the
+    maximum of many noisy pixels) shrinks; 1 for the diffraction-limited image."""
+
+    registration: object
+    """The ``peak`` :class:`.registration.Registration` whose filter is used."""
+    filtered_peak: float
+    """``max(K * I_dl)`` of the unit-flux diffraction-limited image."""
+
+    @classmethod
+    def of(cls, diffraction_limited: np.ndarray, core_fwhm_px: float) -> "MatchedStrehl":
+        from .registration import Registration
+
+        registration = Registration("peak", diffraction_limited, core_fwhm_px)
+        unit = (diffraction_limited / diffraction_limited.sum()).astype(np.float32)[None]
+        return cls(registration, float(registration.filtered(unit).max()))
+
+    def __call__(self, frames: np.ndarray, flux: np.ndarray) -> np.ndarray:
+        """Strehl ratios (k,) of frames (k, n, n) of flux (k,); NaN where the flux is not positive."""
+        peaks = self.registration.filtered(frames).max(axis=(1, 2)).astype(np.float64)
+        return strehl_from(peaks, flux, self.filtered_peak)
 
 
 def integrated_images(partial: np.ndarray, n_crit: int, n_bins: int, last_bin: np.ndarray) -> np.ndarray:

@@ -80,19 +80,28 @@ def lucky_case(settings_config: dict, frames_path, telemetry_path, out_path, scr
     axis_strehl = telemetry.axis_strehl.values.copy()  # (target, frame); the replayed targets' filled below
     order = list(range(n_targets)) if reference is None else [reference] + [
         t for t in range(n_targets) if t != reference]  # the star first: the others take its measurements
-    per_target = {}
-    for target in order:
-        log.info("target %d/%d", target + 1, n_targets)
-        image_reference = None if reference in (None, target) else ImageReference.of(per_target[reference])
-        frames, replay = _frames_of(settings, telemetry, target, frames_path, screens_path, screens_metadata_path)
-        per_target[target] = run_lucky(
-            frames, n_frames, settings.detectors, settings.fractions, peak, settings.case.camera.pixel_scale_arcsec,
-            target_seed(settings.seed, target), criteria_external=_external_criteria(telemetry, target),
-            reference=image_reference, n_blocks=n_blocks, image_crop_px=settings.image_crop_px)
-        if replay is not None:
-            axis_strehl[target] = replay.axis_strehl[0]
-    ds = xr.concat([per_target[t] for t in range(n_targets)], dim="target", data_vars="all", coords="minimal",
-                   compat="override")
+    per_registration, matched_strehl = [], settings.matched_strehl()
+    for registration in settings.registration_methods():
+        per_target = {}
+        for target in order:
+            log.info("registration %s, target %d/%d", registration.name, target + 1, n_targets)
+            image_reference = None if reference in (None, target) else ImageReference.of(per_target[reference])
+            frames, replay = _frames_of(settings, telemetry, target, frames_path, screens_path,
+                                        screens_metadata_path)
+            per_target[target] = run_lucky(
+                frames, n_frames, settings.detectors, settings.fractions, peak,
+                settings.case.camera.pixel_scale_arcsec, target_seed(settings.seed, target),
+                criteria_external=_external_criteria(telemetry, target), reference=image_reference,
+                n_blocks=n_blocks, image_crop_px=settings.image_crop_px, registration=registration,
+                matched_strehl=matched_strehl)
+            if replay is not None:
+                axis_strehl[target] = replay.axis_strehl[0]
+        per_registration.append(xr.concat([per_target[t] for t in range(n_targets)], dim="target", data_vars="all",
+                                          coords="minimal", compat="override"))
+    ds = xr.concat(per_registration, dim="registration", data_vars="all", coords="minimal", compat="override")
+    ds = ds.assign_coords(registration=("registration", list(settings.registrations), {
+        "units": "1", "long_name": "registration method of the frames (recentring 'cog' of the long exposure: "
+                                   "registered by this method)"}))
     ds.attrs.pop("frames_drawn_again", None)  # per target: in its log line
     ds["reference_target"] = ((), -1 if reference is None else reference, {
         "units": "1", "long_name": "target whose frames give every target its image criteria and recentring "
@@ -101,9 +110,10 @@ def lucky_case(settings_config: dict, frames_path, telemetry_path, out_path, scr
     ds["long_exposure_strehl_error"] = ("target", errors, {
         "units": "1", "long_name": f"Monte-Carlo standard error of the long-exposure Strehl (no recentring), "
                                    f"from {n_blocks} batch means"})
-    recentred = [[batch_mean_error(v, n_blocks) for v in ds.frame_recentred_strehl.values[t]]
-                 for t in range(ds.sizes["target"])]
-    ds["recentred_long_exposure_strehl_error"] = (("target", "detector"), recentred, {
+    recentred = [[[batch_mean_error(v, n_blocks) for v in per_target] for per_target in per_registration]
+                 for per_registration in ds.frame_recentred_strehl.transpose("registration", "target", "detector",
+                                                                             "frame").values]
+    ds["recentred_long_exposure_strehl_error"] = (("registration", "target", "detector"), recentred, {
         "units": "1", "long_name": f"Monte-Carlo standard error of the recentred long-exposure Strehl, "
                                    f"from {n_blocks} batch means"})
     for name in ("true_rms_nm", "lgs_rms_nm", "lgs_residual_rms_nm"):
