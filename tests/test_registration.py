@@ -269,3 +269,28 @@ def test_matched_filter_strehl_is_one_for_the_diffraction_limit_and_less_biased_
     pixel_bias = np.mean(frames.max(axis=(1, 2)) / flux) / blob.max() - 1
     matched_bias = np.mean(matched(frames, flux)) / matched(unit, np.ones(1))[0] - 1
     assert pixel_bias > 0.5 and abs(matched_bias) < pixel_bias / 3, (pixel_bias, matched_bias)
+
+
+def test_knees_interpolate_the_crossing_in_log_signal_and_magnitudes_follow_the_zero_point():
+    """A knee is where the value crosses 90 % of the noiseless Strehl (or 110 % of the noiseless
+    d50), linear in log signal between the points either side; NaN if never; the I magnitude of
+    photons per frame follows F_0 dlambda A T t / (h c / lambda) (I = 15: ~870 photons)."""
+    import xarray as xr
+
+    from luckyao.study.figures.registration import i_magnitude, knees, photons_per_frame
+
+    signal = np.array([10.0, 100.0, 1000.0, 10000.0])
+    dims = ("case", "signal")
+    ds = xr.Dataset({"strehl": (dims, [[0.02, 0.05, 0.085, 0.095], [0.0, 0.01, 0.02, 0.05]]),
+                     "strehl_noiseless_detector": (("case",), [0.1, 0.1]),
+                     "d50_arcsec": (dims, [[3.0, 1.5, 1.05, 1.0], [3.0, 1.5, 1.05, 1.0]]),
+                     "d50_arcsec_noiseless_detector": (("case",), [1.0, 1.0])},
+                    coords={"signal": signal, "case": ["a", "b"]})
+    strehl = knees(ds, "strehl").values
+    assert strehl[0] == pytest.approx(10**3.5) and np.isnan(strehl[1])
+    assert knees(ds, "d50_arcsec").values[0] == pytest.approx(10 ** (2 + 0.4 / 0.45))
+    assert float(i_magnitude(photons_per_frame(15.0))) == pytest.approx(15.0)
+    h, c = 6.62607015e-34, 2.99792458e8
+    at_zero = 1.13e-8 * 0.3 * np.pi / 4 * (4.2**2 - 1.2**2) * 0.5 * 0.01 / (h * c / 0.8e-6)
+    assert float(photons_per_frame(15.0)) == pytest.approx(at_zero * 1e-6, rel=1e-9)
+    assert 800 < float(photons_per_frame(15.0)) < 950

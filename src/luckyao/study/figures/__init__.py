@@ -50,7 +50,7 @@ FIGURE_KINDS = {
     "psf_gallery": (psf_gallery_data, draw_psf_gallery),
 }
 
-REGISTRATION_KINDS = ("registration",)
+REGISTRATION_KINDS = ("registration", "quality_vs_signal")
 """The kinds drawn for every registration method; the others draw the baseline, ``cog``."""
 
 

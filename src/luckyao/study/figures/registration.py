@@ -2,11 +2,13 @@
 the signal as an I magnitude, and the knees: the signal below which a method loses its
 noiseless quality."""
 
+from dataclasses import replace
+
 import numpy as np
 import xarray as xr
 
 from .settings import FigureSettings
-from .signal import quality_vs_signal_data
+from .signal import signal_data
 from .style import AO_STYLE, CRITERIA, LINE_STYLES, METRICS, colour, new_figure
 
 REGISTRATION_METRICS = ("strehl", "d50_arcsec")
@@ -48,13 +50,13 @@ def photons_per_frame(i_mag):
 
 
 def registration_data(settings: FigureSettings, datasets) -> xr.Dataset:
-    """:func:`.signal.quality_vs_signal_data` of Strehl and d50 for every registration method of
+    """:func:`.signal.signal_data` of Strehl and d50 for every registration method of
     the cases (along ``registration``), with each curve's knee (:func:`knees`)."""
     methods = [str(m) for m in datasets[0].registration.values]
     per_method = []
     for method in methods:
         chosen = [ds.sel(registration=method) for ds in datasets]
-        per_metric = [quality_vs_signal_data(_with_metric(settings, metric), chosen) for metric in REGISTRATION_METRICS]
+        per_metric = [signal_data(_with_metric(settings, metric), chosen) for metric in REGISTRATION_METRICS]
         per_method.append(xr.merge(per_metric, compat="override", combine_attrs="drop"))
     ds = xr.concat(per_method, dim="registration", data_vars="all", coords="minimal", compat="override")
     ds = ds.assign_coords(registration=("registration", methods, {"long_name": "registration method"}))
@@ -66,7 +68,6 @@ def registration_data(settings: FigureSettings, datasets) -> xr.Dataset:
 
 
 def _with_metric(settings: FigureSettings, metric: str) -> FigureSettings:
-    from dataclasses import replace
     return replace(settings, metric=metric)
 
 
