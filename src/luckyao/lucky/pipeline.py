@@ -4,8 +4,9 @@ Method (Basden 2014, sec. "Shift and add"): every frame gets a scalar quality pe
 criterion (image Strehl, 50%-energy diameter d50, or an external per-frame value such as
 the LGS tilt-removed wavefront rms); frames are ranked over the whole cube
 (:mod:`.ranking`); for each fraction ``f`` the best ``n_f = max(1, round(f n))`` frames are
-recentred on their centre of gravity by a whole number of pixels and added
-(:mod:`.accumulation`). The integrated images are scored by Strehl, FWHM and d50
+registered (:mod:`.registration`: by default on their centre of gravity, by a whole number
+of pixels; else on a matched-filtered position, whole pixels plus a Fourier shift of the
+remainder) and added (:mod:`.accumulation`). The integrated images are scored by Strehl, FWHM and d50
 (:mod:`.scoring`, :mod:`.metrics`).
 
 Frames are ``(k, n, n)`` float32 unit-flux noiseless images indexed ``[y, x]`` with the
@@ -314,7 +315,7 @@ class _LuckyRun:
             registered = measures[1]
         else:
             flux = rows.sum(axis=1)
-            registered = registration.positions_px(frames, flux, centroid_from_sums(rows, cols, flux))
+            registered = registration.positions_px(frames, centroid_from_sums(rows, cols, flux))
             measures = measure_frames(frames, rows, cols, peak, self.encircled, self.peak, centres_px=registered)
         if self.matched_strehl is not None:
             measures = (measures[0], measures[1], self.matched_strehl(frames, measures[0]), measures[3])

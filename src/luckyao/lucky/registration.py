@@ -158,9 +158,9 @@ class Registration:
             transforms.filter(frame, self._kernel_ft, result)
         return out
 
-    def positions_px(self, frames: np.ndarray, flux: np.ndarray, centroids_px: np.ndarray) -> np.ndarray:
-        """Positions (k, 2) (y, x) [pixel] of frames (k, n, n) of ``flux`` (k,) and centres of
-        gravity ``centroids_px`` (k, 2); NaN where the method cannot register a frame."""
+    def positions_px(self, frames: np.ndarray, centroids_px: np.ndarray) -> np.ndarray:
+        """Positions (k, 2) (y, x) [pixel] of frames (k, n, n) whose centres of gravity are
+        ``centroids_px`` (k, 2) (``cog``'s positions); NaN where the method cannot register a frame."""
         if self.name == "cog":
             return np.asarray(centroids_px, dtype=np.float64)
         filtered = self.filtered(frames)
