@@ -6,6 +6,7 @@ from dataclasses import replace
 
 import numpy as np
 import xarray as xr
+from matplotlib.ticker import FormatStrFormatter
 
 from .settings import FigureSettings
 from .signal import signal_data
@@ -110,7 +111,9 @@ def knee_markdown(ds: xr.Dataset, fraction: float, criterion: str, read_noise: f
             for metric in REGISTRATION_METRICS:
                 knee = float(ds[f"{metric}_knee_photons"].sel(case=case, registration=method, fraction=fraction,
                                                                 criterion=criterion, read_noise=read_noise))
-                cells.append("not reached" if np.isnan(knee) else f"{knee:.3g} ({i_magnitude(knee):.1f})")
+                at_most = "≤ " if knee == ds.signal.values[0] else ""  # inside down to the lowest signal drawn
+                cells.append("not reached" if np.isnan(knee) else
+                             f"{at_most}{knee:.3g} (I {'≥ ' if at_most else ''}{i_magnitude(knee):.1f})")
             lines.append(f"| {ds.label.sel(case=case).values} | {method} | {cells[0]} | {cells[1]} |")
     return "\n".join(lines)
 
@@ -120,7 +123,7 @@ def draw_registration(ds: xr.Dataset, title: str):
     selection criterion; the first fraction of the figure; I magnitude on the top axis."""
     fraction = float(ds.fraction.values[0])
     n_rows, n_cols = len(REGISTRATION_METRICS) * ds.sizes["read_noise"], ds.sizes["case"]
-    fig = new_figure(4.6 * n_cols, 3.2 * n_rows + 1.2)
+    fig = new_figure(4.6 * max(n_cols, 2), 3.2 * n_rows + 1.4)
     axes = fig.subplots(n_rows, n_cols, squeeze=False, sharex=True)
     for m, metric in enumerate(REGISTRATION_METRICS):
         for r, read_noise in enumerate(ds.read_noise.values):
@@ -143,13 +146,16 @@ def draw_registration(ds: xr.Dataset, title: str):
                              f"{read_noise:g} e-", loc="left", fontsize=9)
                 ax.grid(alpha=0.3)
                 top = ax.secondary_xaxis("top", functions=(i_magnitude, photons_per_frame))
+                magnitudes = i_magnitude(ds.signal.values[[-1, 0]])
+                top.set_xticks(np.arange(np.ceil(magnitudes[0]), np.floor(magnitudes[1]) + 1))
+                top.xaxis.set_major_formatter(FormatStrFormatter("%g"))
                 top.set_xlabel("I magnitude" if row == 0 else "")
     for ax in axes[-1]:
         ax.set_xlabel("detected photons per frame")
-    fig.legend(*axes[0, 0].get_legend_handles_labels(), loc="outside lower center", ncol=4, fontsize=8,
-               title=f"{100 * fraction:g} % of frames; colour: registration; line style: selection criterion; thin "
-                     f"lines: noiseless detector. I magnitude: {ds.attrs['i_zero_photons_per_frame']:.3g} photons per "
-                     f"frame at I = 0 ({ds.attrs['i_bandwidth_um'] * 1e3:g} nm band, throughput "
-                     f"{ds.attrs['throughput']:g}, {ds.attrs['frame_time_s'] * 1e3:g} ms)", title_fontsize=8)
-    fig.suptitle(f"{title}: integrated-image quality vs signal per frame, by registration method")
+    fig.legend(*axes[0, 0].get_legend_handles_labels(), loc="outside lower center", ncol=2, fontsize=8,
+               title=f"{100 * fraction:g} % of frames; colour: registration; line style: selection criterion;\n"
+                     f"thin lines: noiseless detector. I magnitude: {ds.attrs['i_zero_photons_per_frame']:.3g} "
+                     f"photons per frame at I = 0\n({ds.attrs['i_bandwidth_um'] * 1e3:g} nm band, throughput "
+                     f"{ds.attrs['throughput']:g}, {ds.attrs['frame_time_s'] * 1e3:g} ms, 4.2 m)", title_fontsize=8)
+    fig.suptitle(f"{title}: integrated-image quality vs signal per frame,\nby registration method")
     return fig
