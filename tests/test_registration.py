@@ -268,8 +268,9 @@ def test_matched_filter_strehl_is_one_for_the_diffraction_limit_and_less_biased_
 
 
 def test_knees_interpolate_the_crossing_in_log_signal_and_magnitudes_follow_the_zero_point():
-    """A knee is where the value crosses 90 % of the noiseless Strehl (or 110 % of the noiseless
-    d50), linear in log signal between the points either side; NaN if never; the I magnitude of
+    """A knee is where the value of the noisy selection and shifts on the noiseless frames crosses
+    90 % of the noiseless detector's Strehl (or 110 % of its d50), linear in log signal between
+    the points either side; NaN if never; the I magnitude of
     photons per frame follows F_0 dlambda A T t / (h c / lambda) (I = 15: ~870 photons)."""
     import xarray as xr
 
@@ -277,9 +278,10 @@ def test_knees_interpolate_the_crossing_in_log_signal_and_magnitudes_follow_the_
 
     signal = np.array([10.0, 100.0, 1000.0, 10000.0])
     dims = ("case", "signal")
-    ds = xr.Dataset({"strehl": (dims, [[0.02, 0.05, 0.085, 0.095], [0.0, 0.01, 0.02, 0.05]]),
+    ds = xr.Dataset({"strehl_noiseless": (dims, [[0.02, 0.05, 0.085, 0.095], [0.0, 0.01, 0.02, 0.05]]),
+                     "strehl": (dims, np.full((2, 4), 0.5)),  # the noisy image's own (biased): not used
                      "strehl_noiseless_detector": (("case",), [0.1, 0.1]),
-                     "d50_arcsec": (dims, [[3.0, 1.5, 1.05, 1.0], [3.0, 1.5, 1.05, 1.0]]),
+                     "d50_arcsec_noiseless": (dims, [[3.0, 1.5, 1.05, 1.0], [3.0, 1.5, 1.05, 1.0]]),
                      "d50_arcsec_noiseless_detector": (("case",), [1.0, 1.0])},
                     coords={"signal": signal, "case": ["a", "b"]})
     strehl = knees(ds, "strehl").values
