@@ -10,7 +10,7 @@ from matplotlib.ticker import FormatStrFormatter, NullFormatter
 
 from .settings import FigureSettings
 from .signal import signal_data
-from .style import AO_STYLE, CRITERIA, LINE_STYLES, METRICS, colour, new_figure
+from .style import CRITERIA, LINE_STYLES, METRICS, colour, new_figure
 
 REGISTRATION_METRICS = ("strehl", "d50_arcsec")
 """The figure's metrics: the integrated image's Strehl and 50%-energy diameter."""
