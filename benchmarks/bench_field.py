@@ -44,8 +44,8 @@ REPEATS = 5
 REPLAY_PASSES = 1  # run_lucky reads a target selected and recentred by the star once (one pass)
 
 
-def loop_seconds(case: Case, screens, reconstructors, commands, imaged=None):
-    sensor, estimator = lgs_chain(case, screens, reconstructors, seed=1)
+def loop_seconds(case: Case, screens, reconstructors, commands, calibration, imaged=None):
+    sensor, estimator = lgs_chain(case, screens, reconstructors, 1, calibration)
     start = time.perf_counter()
     telemetry = simulate(case, screens, lambda start, block: None, sensor, estimator, commands, imaged)
     return time.perf_counter() - start, telemetry
@@ -74,7 +74,7 @@ def main(config_path="config/config.yaml"):
         write_screens(spec, Path(tmp) / "s.npy", Path(tmp) / "s.nc", {})
         screens = read_screens(Path(tmp) / "s.npy", Path(tmp) / "s.nc")
         np.asarray(screens.flat).sum()  # page the memory-mapped screens in
-        built = {name: products(config) for name, config in configs.items()}
+        built = {name: products(study, config) for name, config in configs.items()}
         single, field = Case.from_config(configs[SINGLE]), Case.from_config(configs[FIELD])
         imaged = imaged_targets(configs[FIELD])
         off_axis = [t for t in range(len(field.targets)) if t not in imaged]

@@ -30,7 +30,9 @@ from luckyao.optics.imaging import Imager  # noqa: E402
 from luckyao.optics.propagation import Propagator  # noqa: E402
 from luckyao.optics.pupil import TiltRemover  # noqa: E402
 from luckyao.study.case import Case  # noqa: E402
-from luckyao.study.config import commands_spec, load_study, reconstructor_spec, turbulence_spec  # noqa: E402
+from luckyao.study.calibration import build_calibration  # noqa: E402
+from luckyao.study.config import (calibration_spec, commands_spec, deep_merge, load_study,  # noqa: E402
+                                  reconstructor_spec, turbulence_spec)
 from luckyao.study.reconstructor import build_commands, build_reconstructors  # noqa: E402
 from luckyao.study.simulation import lgs_chain, simulate  # noqa: E402
 from luckyao.study.turbulence import read_screens, write_screens  # noqa: E402
@@ -42,17 +44,24 @@ WHOLE_LOOP_CASES = ("noao_r0_13.5cm", "ltao_wfs16", "ltao_wfs32", DEFAULT_CASE)
 REPEATS = 5
 
 
-def products(config: dict):
-    """The case's reconstructors and (with AO) its command matrix and DM slopes."""
+CALIBRATION_DRAWS = 8
+"""Turbulence draws of the benchmarks' WFS calibration: its gains' precision costs nothing per step."""
+
+
+def products(study: dict, config: dict):
+    """The case's reconstructors, (with AO) its command matrix and DM slopes, and (with
+    ``wfs.calibration``) its WFS calibration, from few draws."""
     reconstructors = build_reconstructors(reconstructor_spec(config))["reconstructor"].values
+    spec = calibration_spec(study, deep_merge(config, {"wfs": {"calibration_draws": CALIBRATION_DRAWS}}))
+    calibration = None if spec is None else build_calibration(spec)
     spec = commands_spec(config)
     if spec is None:
-        return reconstructors, None
+        return reconstructors, None, calibration
     commands = build_commands(spec)
-    return reconstructors, (commands["command_matrix"].values, commands["dm_slopes"].values)
+    return reconstructors, (commands["command_matrix"].values, commands["dm_slopes"].values), calibration
 
 
-def stages(case: Case, screens, reconstructors, commands) -> dict:
+def stages(case: Case, screens, reconstructors, commands, calibration) -> dict:
     """Seconds spent per stage over N_STEPS steps of the default AO chain."""
     imager = Imager(case.telescope, case.camera)
     propagator = Propagator(list(case.layers), screens, list(case.targets), imager.grid, mask=imager.mask)
@@ -60,7 +69,7 @@ def stages(case: Case, screens, reconstructors, commands) -> dict:
     to_camera = np.float32(REFERENCE_WAVELENGTH_M / case.camera.wavelength_m)
     for step in range(8):  # warm up: JIT, FFT plans
         imager.intensity(propagator.sample_valid([step], case.layer_scales([step]))[0] * to_camera)
-    sensor, estimator = lgs_chain(case, screens, reconstructors, seed=1)
+    sensor, estimator = lgs_chain(case, screens, reconstructors, 1, calibration)
     surface = case.ao.deformable_mirror(case.telescope).grid_surface(imager.grid, imager.mask)
     correction = OpenLoopCorrection(*commands, surface, sensor.exposure_steps, case.ao.delay_steps,
                                         case.steps_per_frame)
@@ -107,14 +116,14 @@ def stages(case: Case, screens, reconstructors, commands) -> dict:
     return spent
 
 
-def whole_loop_ms(case: Case, screens, reconstructors, commands) -> float:
+def whole_loop_ms(case: Case, screens, reconstructors, commands, calibration) -> float:
     """ms per step of ``simulate``: the time of the case's N_STEPS steps less that of
     its first 4 frames, over the steps between (so set-up, e.g. FFT plans, drops out);
     a first short run compiles what the case needs."""
     seconds = []
     for frames in (4, 4, case.n_frames):
         run = dataclasses.replace(case, n_frames=frames)
-        sensor, estimator = lgs_chain(run, screens, reconstructors, seed=1)
+        sensor, estimator = lgs_chain(run, screens, reconstructors, 1, calibration)
         start = time.perf_counter()
         simulate(run, screens, lambda start, block: None, sensor, estimator, commands)
         seconds.append(time.perf_counter() - start)
@@ -135,8 +144,8 @@ def main(config_path="config/config.yaml"):
         built = {}
         for name, config in configs.items():
             start = time.perf_counter()
-            built[name] = products(config)
-            print(f"{name}: reconstructor and command matrix in {time.perf_counter() - start:.1f} s")
+            built[name] = products(study, config)
+            print(f"{name}: reconstructor, command matrix and WFS calibration in {time.perf_counter() - start:.1f} s")
         default = Case.from_config(configs[DEFAULT_CASE])
         spent = stages(default, screens, *built[DEFAULT_CASE])
         print(f"{DEFAULT_CASE}: {len(default.layers)} layers, {N_STEPS} steps, single thread")

@@ -36,8 +36,9 @@ TARGETS_ARCSEC = [[0.0, 0.0], [20.0, 0.0], [40.0, 0.0]]
 class _Field:
     def __init__(self):
         config, cases = load_study("config/config.yaml")
+        # the raw centroids (wfs.calibration: none): the field's geometry does not depend on the slope gain
         self.config = deep_merge(cases["ltao_r0_13.5cm"], {"duration_s": DURATION_S, "targets_arcsec": TARGETS_ARCSEC,
-                                                           "reference_target": 0})
+                                                           "reference_target": 0, "wfs": {"calibration": "none"}})
         spec = dict(turbulence_spec(config, self.config), duration_s=DURATION_S + 0.05, max_pixel_m=0.033)
         specs = strip_specs(TurbulenceSpec.from_config(spec))
         self.screens = ScreenSet.from_screens(specs, [strip_screen(s, spec["outer_scale_m"], np.random.default_rng(

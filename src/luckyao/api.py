@@ -100,8 +100,9 @@ def run_case(study: dict, case, name: str = "explore", workdir=None) -> xr.Datas
     study's cases, or a dict of overrides of its ``base`` (then called ``name``). The files
     go to ``workdir`` (kept), by default to a temporary folder removed afterwards. Keep
     ``turbulence.duration_s`` short for exploration: the screens are made for all of it."""
-    from .study.config import (canonical_json, commands_key, commands_spec, lucky_settings, reconstructor_key,
-                               reconstructor_spec, turbulence_key, turbulence_spec)
+    from .study.config import (calibration_key, calibration_spec, canonical_json, commands_key, commands_spec,
+                               lucky_settings, reconstructor_key, reconstructor_spec, turbulence_key,
+                               turbulence_spec)
 
     study = copy.deepcopy(study)
     if isinstance(case, dict):
@@ -131,7 +132,8 @@ def run_case(study: dict, case, name: str = "explore", workdir=None) -> xr.Datas
                   "--metadata", str(metadata))
         products = []
         for spec, key, step in ((reconstructor_spec(resolved), reconstructor_key, "reconstructor"),
-                                (commands_spec(resolved), commands_key, "commands")):
+                                (commands_spec(resolved), commands_key, "commands"),
+                                (calibration_spec(study, resolved), calibration_key, "calibration")):
             path = root / f"{key(spec)}.nc" if spec is not None else None
             if path is not None and not path.exists():
                 _step(step, "--spec", canonical_json(spec), "--out", str(path))

@@ -134,7 +134,7 @@ def _fill_bits(lanes, out):  # pragma: no cover (jit)
             out[i + lane], s0[lane], s1[lane], s2[lane], s3[lane] = _xoshiro(s0[lane], s1[lane], s2[lane], s3[lane])
 
 
-@numba.njit(nogil=True)
+@numba.njit(cache=True, nogil=True)
 def _normal_slow(idx, x, s):  # pragma: no cover (jit)
     """The ziggurat after a failed rectangle test of layer ``idx`` with deviate ``x``:
     the wedge or tail test with fresh uniforms of ``s``, then, if rejected, new tries."""
@@ -185,7 +185,7 @@ def _normals(bits32, out, s):  # pragma: no cover (jit)
                     out[i] = _normal_slow(idx, out[i], s)
 
 
-@numba.njit(nogil=True)
+@numba.njit(cache=True, nogil=True)
 def _poisson(lam, s):  # pragma: no cover (jit)
     """Poisson(lam) deviate: inversion below 10, PTRS (Hörmann 1993) above (as numpy)."""
     if lam < 10.0:
@@ -259,7 +259,7 @@ def _first_above(cumulative, u):  # pragma: no cover (jit)
     return lo
 
 
-@numba.njit(nogil=True)
+@numba.njit(cache=True, nogil=True)
 def _place(within, rows, photons, out, s):  # pragma: no cover (jit)
     """Add Poisson counts of means ``photons I`` to ``out`` (n, n), ``I`` the frame of the
     cumulative sums ``within`` (n, n) and ``rows`` (n,) (:func:`cumulative`): ``K ~
@@ -283,7 +283,7 @@ def _place(within, rows, photons, out, s):  # pragma: no cover (jit)
         out[y, lo] += 1.0
 
 
-@numba.njit(nogil=True)
+@numba.njit(cache=True, nogil=True)
 def _per_pixel(unit, photons, out, s):  # pragma: no cover (jit)
     """Add Poisson counts of means ``photons unit`` (n, n) to ``out`` pixel by pixel:
     own draws where the mean is >= BRIGHT, unit-rate arrivals along the others."""

@@ -17,13 +17,9 @@ import xarray as xr
 from ..wfs.calibration import SlopeResponse, measure_response, reference_spot_spectra
 from ..wfs.centroiders import SlopeEstimator, make_centroider
 from ..wfs.shack_hartmann import ShackHartmann, lgs_elongation_otf
-from .case import Case, WfsSettings, lgs_from, seeing_from, telescope_from
+from .case import Case, WfsSettings, lgs_from, seeing_from, telescope_from, wfs_from
 
 log = logging.getLogger(__name__)
-
-CALIBRATION_DRAWS = 256
-"""Turbulence draws (x 4 beacons) per calibration: standard error of each sub-aperture's
-gain about 0.004 (0.8 s per 16 draws for the 8x8 WFS, 4 LGS)."""
 
 
 def case_centroider(settings: WfsSettings, wfs: ShackHartmann, elongation, seeing):
@@ -36,14 +32,13 @@ def case_centroider(settings: WfsSettings, wfs: ShackHartmann, elongation, seein
 def build_calibration(spec: dict) -> xr.Dataset:
     """The slope response of a ``config.calibration_spec``."""
     telescope, lgs = telescope_from(spec["telescope"]), lgs_from(spec["lgs"])
-    settings = WfsSettings(**{"photons_per_subaperture": None, "read_noise_e": 0.0, "exposure_steps": 1,
-                              **spec["wfs"]})
+    settings = wfs_from({"photons_per_subaperture": None, "read_noise_e": 0.0, "exposure_steps": 1, **spec["wfs"]})
     wfs = settings.shack_hartmann(telescope, lgs)
     elongation = lgs_elongation_otf(wfs, lgs)
     seeing = seeing_from(spec["atmosphere"], lgs)
     centroider = case_centroider(settings, wfs, elongation, seeing)
     start = time.perf_counter()
-    response = measure_response(wfs, elongation, seeing, centroider, min(lgs.n_beacons, 4), CALIBRATION_DRAWS,
+    response = measure_response(wfs, elongation, seeing, centroider, min(lgs.n_beacons, 4), settings.calibration_draws,
                                 np.random.default_rng([spec["seed"], 1000]))
     seconds = time.perf_counter() - start
     log.info("%d sub-apertures, %s: mean gains x %.3f, y %.3f (+- %.3f) in %.1f s", wfs.n_valid, settings.centroider,
@@ -61,7 +56,7 @@ def build_calibration(spec: dict) -> xr.Dataset:
             "subaperture_y_m": ("subaperture", wfs.subaperture_xy_m[:, 1], {"units": "m", "long_name": "centre y"}),
         },
         coords={k: (v[0], v[1], v[2]) for k, v in axes.items()},
-        attrs={"draws": CALIBRATION_DRAWS, "beacons_per_draw": min(lgs.n_beacons, 4), "build_seconds": seconds},
+        attrs={"draws": settings.calibration_draws, "beacons_per_draw": min(lgs.n_beacons, 4), "build_seconds": seconds},
     )
 
 

@@ -20,14 +20,15 @@ from ..units import ARCSEC_RAD
 from ..wfs.beacons import LgsConfig
 from ..wfs.calibration import BeaconSeeing
 from ..wfs.shack_hartmann import ShackHartmann
-from .config import frame_count
+from .config import frame_count, wfs_optional_defaults
 
 
 @dataclass(frozen=True)
 class WfsSettings:
     """One LGS Shack-Hartmann per beacon: its geometry, exposure, detector noise and slope
     estimator (``centroider``, its ``threshold`` for ``tcog``, and ``calibration``: none,
-    or ``dither`` for the calibrated response, :mod:`luckyao.wfs.calibration`)."""
+    or ``dither`` for the calibrated response from ``calibration_draws`` turbulence draws,
+    :mod:`luckyao.wfs.calibration`)."""
 
     n_subapertures: int
     n_pixels: int
@@ -36,9 +37,10 @@ class WfsSettings:
     min_illumination: float
     photons_per_subaperture: float | None
     read_noise_e: float
-    centroider: str = "cog"
-    threshold: float = 0.2
-    calibration: str = "none"
+    centroider: str
+    threshold: float
+    calibration: str
+    calibration_draws: int
 
     def shack_hartmann(self, telescope: Telescope, lgs: LgsConfig) -> ShackHartmann:
         """The sensor of these settings at the beacons' wavelength."""
@@ -98,7 +100,8 @@ def lgs_from(block: dict) -> LgsConfig:
 
 
 def wfs_from(block: dict) -> WfsSettings:
-    return WfsSettings(**block)
+    """The settings of a ``wfs`` block, its optional keys by default the schema's."""
+    return WfsSettings(**{**wfs_optional_defaults(), **block})
 
 
 def seeing_from(atmosphere: dict, lgs: LgsConfig) -> BeaconSeeing:

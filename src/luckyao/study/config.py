@@ -7,6 +7,7 @@ few cross-key rules before any job runs; the first problem is reported as a
 """
 
 import copy
+import functools
 import hashlib
 import json
 import math
@@ -24,8 +25,14 @@ class ConfigError(ValueError):
 
 
 def load_schema(path: Path = SCHEMA_PATH) -> dict:
+    """The config schema (a fresh copy: parsed once per process)."""
+    return copy.deepcopy(_parsed_yaml(Path(path)))
+
+
+@functools.cache
+def _parsed_yaml(path: Path) -> dict:
     with open(path) as f:
-        return yaml.safe_load(f)
+        return yaml.load(f, Loader=getattr(yaml, "CSafeLoader", yaml.SafeLoader))
 
 
 def deep_merge(base: dict, override: dict) -> dict:
@@ -367,7 +374,7 @@ def calibration_spec(study: dict, case: dict) -> dict | None:
     the sensor, its estimator and the seeing (the mean r0; not the winds, the noise or
     the exposure time, so cases that differ only there share it)."""
     wfs = case["wfs"]
-    if not case["lgs"]["enabled"] or wfs.get("calibration", "none") == "none":
+    if not case["lgs"]["enabled"] or {**wfs_optional_defaults(), **wfs}["calibration"] == "none":
         return None
     atm = case["atmosphere"]
     return {"seed": study["seed"], "telescope": case["telescope"], "lgs": case["lgs"],
@@ -386,6 +393,13 @@ def figure_default(key: str):
 
 SIGNAL_KINDS = ("quality_vs_signal", "registration")
 """The figure kinds drawn against the detector sweep: their cases get it and every registration method."""
+
+
+def wfs_optional_defaults() -> dict:
+    """The schema's defaults of the ``wfs`` block's optional keys (``centroider``,
+    ``threshold``, ``calibration``): their one home."""
+    keys = load_schema()["definitions"]["case"]["properties"]["wfs"]["properties"]
+    return {key: spec["default"] for key, spec in keys.items() if "default" in spec}
 
 
 def _lucky_value(lucky: dict, key: str):

@@ -62,7 +62,7 @@ class StructureTable:
         return out
 
 
-@numba.njit(nogil=True)
+@numba.njit(cache=True, nogil=True)
 def _weighted_structure_sums(targets, samples, weights, log_r_first, log_r_step, ratio,
                              out):  # pragma: no cover (jit)
     """Fused loop for :meth:`StructureTable.weighted_sums` (no temporaries)."""

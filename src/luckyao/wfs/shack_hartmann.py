@@ -194,7 +194,7 @@ class ShackHartmann:
 
 
 # --- per-step physics ---------------------------------------------------------
-@numba.njit(nogil=True)
+@numba.njit(cache=True, nogil=True)
 def _fill_fields(cos_phase, sin_phase, amplitude, out):  # pragma: no cover (jit)
     """out[b, v] = A (cos + i sin), zero-padded to (M, M); one pass, no temporaries."""
     n_b, n_v, m, _ = out.shape
@@ -212,7 +212,7 @@ def _fill_fields(cos_phase, sin_phase, amplitude, out):  # pragma: no cover (jit
                     out[b, v, i, j] = 0
 
 
-@numba.njit(nogil=True)
+@numba.njit(cache=True, nogil=True)
 def _add_power(spectrum, out, overwrite):  # pragma: no cover (jit)
     """out (+)= |spectrum|^2 elementwise (float32)."""
     flat_s = spectrum.reshape(-1)
