@@ -44,7 +44,7 @@ from pathlib import Path  # noqa: E402
 import numpy as np  # noqa: E402
 
 from luckyao.atmosphere.statistics import von_karman_psd  # noqa: E402
-from luckyao.lucky import pipeline  # noqa: E402
+from luckyao.lucky import method_run  # noqa: E402
 from luckyao.lucky.detector import Detector  # noqa: E402
 from luckyao.lucky.pipeline import run_lucky  # noqa: E402
 from luckyao.lucky.ranking import ExternalCriterion  # noqa: E402
@@ -126,7 +126,7 @@ def tiled(frames: np.ndarray, n_frames: int):
 
 
 SCORING = {"s": 0.0, "images": 0}
-_score = pipeline.score_partial_sums
+_score = method_run.score_partial_sums
 
 
 def _timed_score(partial, *args, **kwargs):
@@ -138,7 +138,7 @@ def _timed_score(partial, *args, **kwargs):
     return out
 
 
-pipeline.score_partial_sums = _timed_score
+method_run.score_partial_sums = _timed_score
 
 
 def registration(name: str) -> Registration:

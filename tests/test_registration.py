@@ -5,10 +5,11 @@ from functools import lru_cache
 import numpy as np
 import pytest
 import scipy.fft
+import xarray as xr
 
 from luckyao.lucky.detector import Detector, KeyedNoise
 from luckyao.lucky.metrics import centroid_px
-from luckyao.lucky.pipeline import ImageReference, run_lucky
+from luckyao.lucky.pipeline import ImageReference, run_lucky, run_lucky_methods
 from luckyao.lucky.ranking import ExternalCriterion, fraction_counts
 from luckyao.lucky.scoring import MatchedStrehl
 from luckyao.lucky.registration import (REGISTRATIONS, WINDOW_RADIUS_FWHM, Registration, fourier_shift,
@@ -292,3 +293,30 @@ def test_knees_interpolate_the_crossing_in_log_signal_and_magnitudes_follow_the_
     at_zero = 1.13e-8 * 0.3 * np.pi / 4 * (4.2**2 - 1.2**2) * 0.5 * 0.01 / (h * c / 0.8e-6)
     assert float(photons_per_frame(15.0)) == pytest.approx(at_zero * 1e-6, rel=1e-9)
     assert 800 < float(photons_per_frame(15.0)) < 950
+
+
+def test_methods_sharing_the_passes_give_each_method_its_own_run_bit_for_bit():
+    """``run_lucky_methods``: every registration method in one run (each chunk read and each noisy
+    detector's noise drawn once, the frames any method guessed wrong drawn again once) gives each
+    method's dataset bit for bit as a run of that method alone, with noisy detectors, time blocks,
+    a frame without flux and, for a target registered on a reference, each method's own reference."""
+    n, n_frames, seed = 32, 60, 4
+    frames = gaussian_spots(n, n_frames, 9)
+    frames[17] = 0.0
+    regs = [spot_registration(name, n) for name in REGISTRATIONS]
+    external = ExternalCriterion("lgs_rms", np.random.default_rng(3).permutation(n_frames) * 1.0, False, "nm")
+    detectors = [Detector("ideal"), Detector("faint", 150.0, 0.1), Detector("bright", 3e3, 1.0),
+                 Detector("em", 400.0, 0.1, electron_multiplying=True)]
+    chunks = lambda: ((s, frames[s:s + 9]) for s in range(0, n_frames, 9))  # noqa: E731
+    args = (chunks, n_frames, detectors, [0.1, 0.3, 1.0], 1 / (2 * np.pi), 0.02, seed)
+    kwargs = dict(criteria_external=[external], image_crop_px=16, n_blocks=3, progress_interval_s=0)
+    together = run_lucky_methods(*args, registrations=regs, **kwargs)
+    on_reference = run_lucky_methods(*args, registrations=regs, references=[ImageReference.of(ds) for ds in together],
+                                     **kwargs)
+    assert sum(int(ds.attrs["frames_drawn_again"].sum()) for ds in together) > 0  # pass 2 moves frames
+    for reg, ds, target in zip(regs, together, on_reference):
+        alone = run_lucky(*args, registration=reg, **kwargs)
+        xr.testing.assert_identical(ds, alone)
+        np.testing.assert_array_equal(ds.attrs["frames_drawn_again"], alone.attrs["frames_drawn_again"])
+        xr.testing.assert_identical(target, run_lucky(*args, registration=reg, reference=ImageReference.of(alone),
+                                                      **kwargs))

@@ -1,10 +1,9 @@
 """Scores of lucky imaging: per-frame measures, and the integrated images of the partial sums.
 
 Every score is :mod:`.metrics`'s (one home per formula); here they are applied to the
-detected frames of a chunk (:func:`measure_frames`, from the sums the detection gives),
-to the partial sums of :class:`.accumulation.PartialSums` (:func:`integrated_images`,
-:func:`score_partial_sums`) and to the frames' values near the axis
-(:func:`value_at_peak`).
+detected frames of a chunk (:func:`frame_sums`, :class:`MatchedStrehl`), to the partial
+sums of :class:`.accumulation.PartialSums` (:func:`integrated_images`,
+:func:`score_partial_sums`) and to the frames' values near the axis (:func:`value_at_peak`).
 """
 
 from dataclasses import dataclass
@@ -12,8 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import kernels
-from .metrics import (EncircledEnergy, centroid_from_sums, d50_from_radius, relative_to_diffraction_limit,
-                      score_images, strehl_from)
+from .metrics import EncircledEnergy, relative_to_diffraction_limit, score_images, strehl_from
 
 
 def frame_sums(frames: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -23,21 +21,6 @@ def frame_sums(frames: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     rows, cols, peak = np.empty((k, n)), np.empty((k, n)), np.empty(k, np.float32)
     kernels.frame_sums(frames, rows, cols, peak)
     return rows, cols, peak
-
-
-def measure_frames(frames: np.ndarray, rows: np.ndarray, cols: np.ndarray, peak: np.ndarray,
-                   encircled: EncircledEnergy, diffraction_limited_peak: float,
-                   centres_px: np.ndarray | None = None) -> tuple[np.ndarray, ...]:
-    """Flux (k,), centre of gravity (k, 2) (y, x) [pixel], Strehl (k,) and d50 [pixel] (k,) of
-    frames (k, n, n) from their row and column sums (k, n) and peaks (k,) (:func:`frame_sums`);
-    NaN where the flux is not positive. The d50 is centred on ``centres_px`` (k, 2), by default
-    the centre of gravity (:meth:`EncircledEnergy.radius_px_binned`, the encircled energy
-    summed by radial bins); NaN where a centre is not finite."""
-    flux = rows.sum(axis=1)
-    centroids = centroid_from_sums(rows, cols, flux)
-    strehl_ratio = strehl_from(peak, flux, diffraction_limited_peak)
-    radius = encircled.radius_px_binned(frames, centroids if centres_px is None else centres_px, flux=flux)
-    return flux, centroids, strehl_ratio, d50_from_radius(radius, 1.0)
 
 
 @dataclass(frozen=True, eq=False)

@@ -1,7 +1,8 @@
 """Lucky post-processing of one case: frames + telemetry -> ``lucky.nc``.
 
-Runs ``lucky.run_lucky`` for every target and detector (with a ``reference_target``,
-the star's frames select and recentre every target), and adds what the
+Runs ``lucky.run_lucky_methods`` for every target, detector and registration method (the
+methods in the same passes over a target's frames; with a ``reference_target``, the star's
+frames select and recentre every target, by each method), and adds what the
 figures need from the telemetry: the long-exposure Strehl's Monte-Carlo error
 (batch means of the per-frame value on the axis) and the mean r0.
 """
@@ -12,7 +13,7 @@ import logging
 import numpy as np
 import xarray as xr
 
-from ..lucky.pipeline import ImageReference, run_lucky
+from ..lucky.pipeline import ImageReference, run_lucky_methods
 from ..lucky.ranking import ExternalCriterion
 from ..seeds import target_seed
 from .datasets import iter_frame_blocks, open_dataset, provenance, require_finite, write_dataset
@@ -40,7 +41,7 @@ def batch_mean_error(values: np.ndarray, n_blocks: int) -> float:
 
 def _frames_of(settings: LuckySettings, telemetry: xr.Dataset, target: int, frames_path, screens_path,
                screens_metadata_path):
-    """A target's frames for :func:`.pipeline.run_lucky`: stored, or replayed from the screens and
+    """A target's frames for :func:`.pipeline.run_lucky_methods`: stored, or replayed from the screens and
     the recorded DM commands (:class:`.simulation.Replay`, whose values on the axis the caller
     reads once they are made); the replay, or None."""
     if target in settings.imaged_targets:
@@ -80,24 +81,22 @@ def lucky_case(settings_config: dict, frames_path, telemetry_path, out_path, scr
     axis_strehl = telemetry.axis_strehl.values.copy()  # (target, frame); the replayed targets' filled below
     order = list(range(n_targets)) if reference is None else [reference] + [
         t for t in range(n_targets) if t != reference]  # the star first: the others take its measurements
-    per_registration, matched_strehl = [], settings.matched_strehl()
-    for registration in settings.registration_methods():
-        per_target = {}
-        for target in order:
-            log.info("registration %s, target %d/%d", registration.name, target + 1, n_targets)
-            image_reference = None if reference in (None, target) else ImageReference.of(per_target[reference])
-            frames, replay = _frames_of(settings, telemetry, target, frames_path, screens_path,
-                                        screens_metadata_path)
-            per_target[target] = run_lucky(
-                frames, n_frames, settings.detectors, settings.fractions, peak,
-                settings.case.camera.pixel_scale_arcsec, target_seed(settings.seed, target),
-                criteria_external=_external_criteria(telemetry, target), reference=image_reference,
-                n_blocks=n_blocks, image_crop_px=settings.image_crop_px, registration=registration,
-                matched_strehl=matched_strehl)
-            if replay is not None:
-                axis_strehl[target] = replay.axis_strehl[0]
-        per_registration.append(xr.concat([per_target[t] for t in range(n_targets)], dim="target", data_vars="all",
-                                          coords="minimal", compat="override"))
+    registrations, matched_strehl = settings.registration_methods(), settings.matched_strehl()
+    per_target = {}  # target -> its datasets, one per registration method (all made in the same passes)
+    for target in order:
+        log.info("target %d/%d, registration %s", target + 1, n_targets, ", ".join(settings.registrations))
+        references = None if reference in (None, target) else [ImageReference.of(ds) for ds in per_target[reference]]
+        frames, replay = _frames_of(settings, telemetry, target, frames_path, screens_path, screens_metadata_path)
+        per_target[target] = run_lucky_methods(
+            frames, n_frames, settings.detectors, settings.fractions, peak,
+            settings.case.camera.pixel_scale_arcsec, target_seed(settings.seed, target),
+            criteria_external=_external_criteria(telemetry, target), references=references,
+            n_blocks=n_blocks, image_crop_px=settings.image_crop_px, registrations=registrations,
+            matched_strehl=matched_strehl)
+        if replay is not None:
+            axis_strehl[target] = replay.axis_strehl[0]
+    per_registration = [xr.concat([per_target[t][m] for t in range(n_targets)], dim="target", data_vars="all",
+                                  coords="minimal", compat="override") for m in range(len(registrations))]
     ds = xr.concat(per_registration, dim="registration", data_vars="all", coords="minimal", compat="override")
     ds = ds.assign_coords(registration=("registration", list(settings.registrations), {
         "units": "1", "long_name": "registration method of the frames (recentring 'cog' of the long exposure: "
