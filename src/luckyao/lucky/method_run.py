@@ -22,7 +22,7 @@ from .detector import Detector
 from .guesses import GuessedBins
 from .metrics import d50_from_radius, score_images
 from .ranking import criterion_bins
-from .registration import Registration, fourier_shift, shifts_of
+from .registration import FrameSpectra, Registration, shifts_of
 from .scoring import score_partial_sums, value_at_peak
 
 
@@ -68,12 +68,13 @@ class FrameValues:
             else:
                 self.shifts[i, sl] = recentring_shifts_px(centroids, self.n_pixels)
 
-    def shifted(self, frames: np.ndarray, i: int, sl: slice, which: np.ndarray | None = None,
+    def shifted(self, spectra: FrameSpectra, i: int, sl: slice, which: np.ndarray | None = None,
                 slot: int = 0) -> np.ndarray:
-        """Frames ``sl`` of detector ``i`` (k, n, n) shifted by their sub-pixel remainders
-        (:func:`.registration.fourier_shift`; the frames themselves when every remainder is 0),
-        those of ``which`` (k,) bool only (the others' values undefined), in buffer ``slot``
-        (0 or 1: valid until that slot's next use)."""
+        """Frames ``sl`` of detector ``i`` (k, n, n) (held by ``spectra``, :class:`.registration.FrameSpectra`)
+        shifted by their sub-pixel remainders (:func:`.registration.fourier_shift`; the frames
+        themselves when every remainder is 0), those of ``which`` (k,) bool only (the others' values
+        undefined), in buffer ``slot`` (0 or 1: valid until that slot's next use)."""
+        frames = spectra.frames
         remainder = self.remainder[i, sl]
         moving = np.any(remainder != 0, axis=1)
         if which is not None:
@@ -85,8 +86,7 @@ class FrameValues:
             self.buffer = np.empty((2, *frames.shape), np.float32)
         out = self.buffer[slot, :k]
         out[~moving] = frames[~moving]
-        out[moving] = fourier_shift(frames[moving], remainder[moving])
-        return out
+        return spectra.shifted(np.flatnonzero(moving), remainder[moving], out)
 
     def unregistered(self) -> np.ndarray:
         """Frames (per detector) not registered (no position, no shift): no flux, or no peak."""
@@ -131,16 +131,18 @@ class MethodRun:
                 self.bins[i, c] = criterion_bins(self.values[c, i], larger[c], counts)
         self.blocks.assign(self.values, larger, crits)
 
-    def measures(self, frames: np.ndarray, common: tuple[np.ndarray, ...]) -> tuple[np.ndarray, ...]:
+    def measures(self, spectra: FrameSpectra, common: tuple[np.ndarray, ...]) -> tuple[np.ndarray, ...]:
         """Flux, centre of gravity, Strehl, d50 [pixel] (about the registered position; the centre
-        of gravity with ``cog``) and registered position of frames (k, n, n) whose flux, centre of
-        gravity and Strehl are ``common`` (:meth:`.pipeline._LuckyRun.common_measures`: they do not
-        depend on the method); with a reference, their flux only."""
+        of gravity with ``cog``) and registered position of the frames (k, n, n) of ``spectra``
+        whose flux, centre of gravity and Strehl are ``common``
+        (:meth:`.pipeline._LuckyRun.common_measures`: they do not depend on the method); with a
+        reference, their flux only."""
         flux, centroids, strehl = common
         if self.frames.reference is not None:
             return (flux,)
-        registered = self.registration.positions_px(frames, centroids)
-        radius = self.run.encircled.radius_px_binned(frames, registered, flux=flux)
+        frames = spectra.frames
+        registered = self.registration.positions_px(frames, centroids, spectra)
+        radius = self.run.encircled.radius_px_binned(frames, registered, flux=flux, spectra=spectra)
         return flux, centroids, strehl, d50_from_radius(radius, 1.0), registered
 
     def keep_noiseless(self, clean: tuple[np.ndarray, ...]) -> None:
@@ -155,11 +157,12 @@ class MethodRun:
         self.sums.allocate(n_pixels, chunk_frames)
         self.frames.allocate(n_pixels)
 
-    def add_detected(self, i: int, detector: Detector, sl: slice, detected: np.ndarray, unit: np.ndarray,
+    def add_detected(self, i: int, detector: Detector, sl: slice, detected: FrameSpectra, unit: FrameSpectra,
                      measures: Sequence[np.ndarray]) -> None:
-        """Pass 1, detector ``i``'s frames ``sl``: their measures recorded, the frames (and the
-        noiseless ones ``unit``) recentred into the sums of the criteria binned early, the recentred
-        long exposure and, for a noisy detector, the guessed bins of the late criteria."""
+        """Pass 1, detector ``i``'s frames ``sl`` (``detected``, and the noiseless ones ``unit``: their
+        :class:`.registration.FrameSpectra`): their measures recorded, the frames recentred into the
+        sums of the criteria binned early, the recentred long exposure and, for a noisy detector,
+        the guessed bins of the late criteria."""
         sums, early, late, guessed, frames = self.sums, self.early, self.late, self.guessed, self.frames
         k = sl.stop - sl.start
         frames.record(i, sl, measures)
@@ -187,8 +190,8 @@ class MethodRun:
         self.values[0], self.values[1] = self.frames.strehl, self.frames.d50_arcsec(self.run.scale)
         self.assign(self.late)
 
-    def add_noiseless_detector(self, i: int, sl: slice, unit: np.ndarray) -> None:
-        """Pass 2, a noiseless detector ``i``'s frames ``sl``: into their late criteria's bins."""
+    def add_noiseless_detector(self, i: int, sl: slice, unit: FrameSpectra) -> None:
+        """Pass 2, a noiseless detector ``i``'s frames ``sl`` (``unit``): into their late criteria's bins."""
         late, sums = self.late, self.sums
         final_rows = np.concatenate([sums.run_rows(late, self.bins[i, late, sl]),
                                      sums.block_rows(late, sl, self.blocks.bins[i, late, sl])], axis=1)
@@ -205,11 +208,11 @@ class MethodRun:
                                        sums.block_rows(late, sl, guessed.block[i, late, sl])], axis=1)
         return final_rows, guessed_rows, (final_rows != guessed_rows).any(axis=1)
 
-    def move(self, i: int, sl: slice, detected: np.ndarray, detected_rows: np.ndarray, unit: np.ndarray,
+    def move(self, i: int, sl: slice, detected: FrameSpectra, detected_rows: np.ndarray, unit: FrameSpectra,
              wrong: tuple[np.ndarray, np.ndarray, np.ndarray]) -> None:
         """Pass 2: detector ``i``'s frames ``sl`` guessed ``wrong`` (:meth:`guessed_wrong`), drawn
         again (``detected`` and its row sums ``detected_rows``, valid for those frames), moved from
-        their guessed bins to their final ones (detected and noiseless)."""
+        their guessed bins to their final ones (detected, and noiseless ``unit``)."""
         final_rows, guessed_rows, drawn = wrong
         if not drawn.any():
             return

@@ -79,7 +79,7 @@ from .detector import Detector, KeyedNoise
 from .method_run import MethodRun
 from .metrics import EncircledEnergy, centroid_from_sums, strehl_from
 from .ranking import IMAGE_CRITERIA, ExternalCriterion, fraction_counts
-from .registration import COG, Registration
+from .registration import COG, FrameSpectra, Registration
 from .scoring import MatchedStrehl, frame_sums
 
 Chunks = Callable[[], Iterable[tuple[int, np.ndarray]]]
@@ -225,6 +225,8 @@ class _LuckyRun:
         self.guessing = any(m.guessing for m in self.methods)  # the same for every method
         self.noise = _ChunkNoise(detectors)
         self.long_none = self.encircled = self.clean = None
+        # the spectra of a detector's frames and of the noiseless ones, each made once per chunk and shared
+        self.detected, self.unit = FrameSpectra(), FrameSpectra()
 
     def _chunks(self, name: str) -> Iterator[tuple[slice, np.ndarray]]:
         """The frames' chunks ``(frames' slice, frames)``, the work arrays made at the first, with progress."""
@@ -235,15 +237,15 @@ class _LuckyRun:
             yield slice(start, start + k), unit
             progress.update(start + k)
 
-    def common_measures(self, frames, rows, cols, peak) -> tuple[np.ndarray, ...]:
-        """Flux, centre of gravity and Strehl (of the brightest pixel, or matched-filtered) of frames
-        (k, n, n) from their row and column sums and peaks: the same for every method."""
+    def common_measures(self, spectra: FrameSpectra, rows, cols, peak) -> tuple[np.ndarray, ...]:
+        """Flux, centre of gravity and Strehl (of the brightest pixel, or matched-filtered) of the
+        frames (k, n, n) of ``spectra`` from their row and column sums and peaks: the same for every method."""
         flux = rows.sum(axis=1)
         if self.methods[0].frames.reference is not None:
             return flux, None, None
         centroids = centroid_from_sums(rows, cols, flux)
         if self.matched_strehl is not None:
-            return flux, centroids, self.matched_strehl(frames, flux)
+            return flux, centroids, self.matched_strehl(spectra.frames, flux, spectra)
         return flux, centroids, strehl_from(peak, flux, self.peak)
 
     def measure_noiseless(self) -> None:
@@ -254,9 +256,10 @@ class _LuckyRun:
         n = self.n_frames
         clean = [tuple(np.full(shape, np.nan) for shape in (n, (n, 2), n, n, (n, 2))) for _ in self.methods]
         for sl, unit in self._chunks("pass 0/2: noiseless frames"):
-            common = self.common_measures(unit, *frame_sums(unit))
+            spectra = self.unit.reset(unit)
+            common = self.common_measures(spectra, *frame_sums(unit))
             for method, whole in zip(self.methods, clean):
-                for to, part in zip(whole, method.measures(unit, common)):
+                for to, part in zip(whole, method.measures(spectra, common)):
                     to[sl] = part
         for method, whole in zip(self.methods, clean):
             method.keep_noiseless(whole)
@@ -273,22 +276,23 @@ class _LuckyRun:
                 self.long_none = np.zeros((len(self.detectors), n, n))
                 for method in self.methods:
                     method.allocate(n, k)
-            chunk = self.noise.prepare(unit)
+            chunk, spectra_unit = self.noise.prepare(unit), self.unit.reset(unit)
             for i, detector in enumerate(self.detectors):
                 if not detector.noiseless:
                     detected, rows, cols, peak = chunk.detect(detector, self.seed, sl.start, self.noise.buffer)
-                    common = self.common_measures(detected, rows, cols, peak)
-                    measures = [method.measures(detected, common) for method in self.methods]
+                    spectra = self.detected.reset(detected)
+                    common = self.common_measures(spectra, rows, cols, peak)
+                    measures = [method.measures(spectra, common) for method in self.methods]
                 elif self.clean is not None:  # measured in pass 0
-                    detected = unit
+                    spectra = spectra_unit
                     measures = [[x[sl] for x in whole] for whole in self.clean]
                 else:
-                    detected = unit
-                    common = self.common_measures(unit, *frame_sums(unit))
-                    measures = [method.measures(unit, common) for method in self.methods]
-                kernels.add_frames(detected, self.long_none[i])
+                    spectra = spectra_unit
+                    common = self.common_measures(spectra, *frame_sums(unit))
+                    measures = [method.measures(spectra, common) for method in self.methods]
+                kernels.add_frames(spectra.frames, self.long_none[i])
                 for method, measured in zip(self.methods, measures):
-                    method.add_detected(i, detector, sl, detected, unit, measured)
+                    method.add_detected(i, detector, sl, spectra, spectra_unit, measured)
             for method in self.methods:
                 method.score_blocks(sl, method.early)
 
@@ -301,19 +305,20 @@ class _LuckyRun:
         for method in self.methods:
             method.rank_late()
         for sl, unit in self._chunks("pass 2/2: frames"):
-            chunk = self.noise.prepare(unit)
+            chunk, spectra_unit = self.noise.prepare(unit), self.unit.reset(unit)
             for i, detector in enumerate(self.detectors):
                 if detector.noiseless:
                     for method in self.methods:
-                        method.add_noiseless_detector(i, sl, unit)
+                        method.add_noiseless_detector(i, sl, spectra_unit)
                     continue
                 wrong = [method.guessed_wrong(i, sl) for method in self.methods]
                 drawn = np.logical_or.reduce([w[2] for w in wrong])
                 if not drawn.any():
                     continue
                 detected, rows, _, _ = chunk.detect(detector, self.seed, sl.start, self.noise.buffer, drawn)
+                spectra = self.detected.reset(detected)  # only the frames drawn are transformed
                 for method, w in zip(self.methods, wrong):
-                    method.move(i, sl, detected, rows, unit, w)
+                    method.move(i, sl, spectra, rows, spectra_unit, w)
             for method in self.methods:
                 method.score_blocks(sl, method.late)
         if self.guessing:

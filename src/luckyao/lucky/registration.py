@@ -63,7 +63,8 @@ def gaussian_kernel(n_pixels: int, fwhm_px: float) -> np.ndarray:
 
 class _Transforms:
     """FFTW's real 2-D transforms of one n x n float32 frame, both ways (FFTW_ESTIMATE: chosen
-    without timing, so the rounding is the same in every process). Not thread-safe."""
+    without timing, so the rounding is the same in every process, and the same as
+    :meth:`.metrics.EncircledEnergy.fractions_binned`'s). Not thread-safe."""
 
     def __init__(self, n: int):
         self.frame = pyfftw.empty_aligned((n, n), dtype=np.float32)
@@ -73,18 +74,22 @@ class _Transforms:
                                     flags=("FFTW_ESTIMATE", "FFTW_DESTROY_INPUT"), threads=1)
         self.ky, self.kx = np.fft.fftfreq(n), np.fft.rfftfreq(n)
 
-    def filter(self, frame: np.ndarray, kernel_ft: np.ndarray, out: np.ndarray) -> None:
-        """``out`` = the periodic convolution of ``frame`` with the kernel of spectrum ``kernel_ft``."""
+    def transform(self, frame: np.ndarray, out: np.ndarray) -> None:
+        """``out`` (n, n/2 + 1) = the real FFT of ``frame``."""
         self.frame[:] = frame
         self.forward()
+        out[:] = self.spectrum
+
+    def filter(self, spectrum: np.ndarray, kernel_ft: np.ndarray, out: np.ndarray) -> None:
+        """``out`` = the periodic convolution of the frame of ``spectrum`` with the kernel of spectrum ``kernel_ft``."""
+        self.spectrum[:] = spectrum
         self.spectrum *= kernel_ft
         self.backward()  # normalised by FFTW's interface (1 / n^2)
         out[:] = self.frame
 
-    def shift(self, frame: np.ndarray, shift_px: np.ndarray, out: np.ndarray) -> None:
-        """``out`` = ``frame`` shifted by ``shift_px`` (y, x): its spectrum times the separable ramp."""
-        self.frame[:] = frame
-        self.forward()
+    def shift(self, spectrum: np.ndarray, shift_px: np.ndarray, out: np.ndarray) -> None:
+        """``out`` = the frame of ``spectrum`` shifted by ``shift_px`` (y, x): the spectrum times the separable ramp."""
+        self.spectrum[:] = spectrum
         self.spectrum *= np.exp(-2j * np.pi * self.ky * shift_px[0]).astype(np.complex64)[:, None]
         self.spectrum *= np.exp(-2j * np.pi * self.kx * shift_px[1]).astype(np.complex64)[None, :]
         self.backward()
@@ -96,6 +101,60 @@ def _transforms(n: int) -> _Transforms:
     return _Transforms(n)
 
 
+class FrameSpectra:
+    """The real FFTs (FFTW float32) of a chunk of frames (k, n, n), each made once when first
+    needed, and shared by what is made of them: the frames filtered by a registration's kernel
+    (made once per kernel: ``windowed_cog``, ``peak`` and the matched-filter Strehl share theirs),
+    their Fourier shifts (:meth:`shifted`) and their encircled energy
+    (:meth:`.metrics.EncircledEnergy.fractions_binned`). The same values as transforming each
+    frame again for each use. :meth:`reset` holds another chunk (the buffers reused)."""
+
+    def __init__(self, frames: np.ndarray | None = None):
+        self.frames, self._spectra, self._done, self._buffers, self._filtered = None, None, None, {}, {}
+        if frames is not None:
+            self.reset(frames)
+
+    def reset(self, frames: np.ndarray) -> "FrameSpectra":
+        """Hold the spectra of ``frames`` (k, n, n) float32 (the previous chunk's forgotten)."""
+        k, n = len(frames), frames.shape[-1]
+        if self._spectra is None or len(self._spectra) < k or self._spectra.shape[1] != n:
+            self._spectra = np.empty((k, n, n // 2 + 1), np.complex64)
+            self._done, self._buffers = np.zeros(k, bool), {}
+        self.frames = frames
+        self._done[:] = False
+        self._filtered = {}
+        return self
+
+    def spectrum(self, j: int) -> np.ndarray:
+        """Frame ``j``'s real FFT (n, n/2 + 1) complex64."""
+        if not self._done[j]:
+            _transforms(self.frames.shape[-1]).transform(self.frames[j], self._spectra[j])
+            self._done[j] = True
+        return self._spectra[j]
+
+    def filtered(self, key, kernel_ft: np.ndarray) -> np.ndarray:
+        """The frames (k, n, n) float32 convolved with the kernel of spectrum ``kernel_ft`` (made once
+        per ``key``, which names the kernel; read only)."""
+        if key not in self._filtered:
+            k, n = len(self.frames), self.frames.shape[-1]
+            buffer = self._buffers.get(key)
+            if buffer is None or len(buffer) < k:
+                buffer = self._buffers[key] = np.empty((len(self._spectra), n, n), np.float32)
+            transforms = _transforms(n)
+            for j in range(k):
+                transforms.filter(self.spectrum(j), kernel_ft, buffer[j])
+            self._filtered[key] = buffer[:k]
+        return self._filtered[key]
+
+    def shifted(self, which: np.ndarray, shifts_px: np.ndarray, out: np.ndarray) -> np.ndarray:
+        """Frames ``which`` (indices) shifted by ``shifts_px`` (len(which), 2) (y, x) [pixel] into
+        the same frames of ``out`` (k, n, n) (:func:`fourier_shift`; the others untouched)."""
+        transforms = _transforms(self.frames.shape[-1])
+        for j, s in zip(which, np.asarray(shifts_px, dtype=np.float64)):
+            transforms.shift(self.spectrum(j), s, out[j])
+        return out
+
+
 def fourier_shift(frames: np.ndarray, shifts_px: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
     """Frames (k, n, n) shifted by ``shifts_px`` (k, 2) (y, x) [pixel], periodic:
     ``out(r) = frame(r - s)`` for the band-limited frame, by the phase ramp
@@ -103,10 +162,7 @@ def fourier_shift(frames: np.ndarray, shifts_px: np.ndarray, out: np.ndarray | N
     frequency is untouched); a whole-pixel shift equals ``np.roll`` to float rounding."""
     frames = np.asarray(frames, dtype=np.float32)
     out = np.empty(frames.shape, np.float32) if out is None else out
-    transforms = _transforms(frames.shape[-1])
-    for frame, s, moved in zip(frames, np.asarray(shifts_px, dtype=np.float64), out):
-        transforms.shift(frame, s, moved)
-    return out
+    return FrameSpectra(frames).shifted(np.arange(len(frames)), shifts_px, out)
 
 
 def parabola_offset(below: np.ndarray, at: np.ndarray, above: np.ndarray) -> np.ndarray:
@@ -150,20 +206,26 @@ class Registration:
         """Whether the shifts have a sub-pixel part (every method but ``cog``)."""
         return self.name != "cog"
 
-    def filtered(self, frames: np.ndarray) -> np.ndarray:
-        """The frames (k, n, n) correlated with the method's kernel (float32)."""
-        out = np.empty(frames.shape, np.float32)
-        transforms = _transforms(frames.shape[-1])
-        for frame, result in zip(frames, out):
-            transforms.filter(frame, self._kernel_ft, result)
-        return out
+    @property
+    def filter_key(self) -> tuple:
+        """Names the method's kernel (:meth:`FrameSpectra.filtered`): the Gaussian of the core's FWHM
+        (``windowed_cog``, ``peak``), or this method's reference (``xcorr``)."""
+        return ("xcorr", id(self)) if self.name == "xcorr" else ("gaussian", self.core_fwhm_px)
 
-    def positions_px(self, frames: np.ndarray, centroids_px: np.ndarray) -> np.ndarray:
+    def filtered(self, frames: np.ndarray, spectra: FrameSpectra | None = None) -> np.ndarray:
+        """The frames (k, n, n) correlated with the method's kernel (float32; read only), from their
+        ``spectra`` if given (of these frames)."""
+        spectra = FrameSpectra(np.asarray(frames, dtype=np.float32)) if spectra is None else spectra
+        return spectra.filtered(self.filter_key, self._kernel_ft)
+
+    def positions_px(self, frames: np.ndarray, centroids_px: np.ndarray,
+                     spectra: FrameSpectra | None = None) -> np.ndarray:
         """Positions (k, 2) (y, x) [pixel] of frames (k, n, n) whose centres of gravity are
-        ``centroids_px`` (k, 2) (``cog``'s positions); NaN where the method cannot register a frame."""
+        ``centroids_px`` (k, 2) (``cog``'s positions), the frames' ``spectra`` if known
+        (:class:`FrameSpectra`); NaN where the method cannot register a frame."""
         if self.name == "cog":
             return np.asarray(centroids_px, dtype=np.float64)
-        filtered = self.filtered(frames)
+        filtered = self.filtered(frames, spectra)
         k, n, _ = filtered.shape
         flat = filtered.reshape(k, -1)
         best = np.argmax(flat, axis=1)

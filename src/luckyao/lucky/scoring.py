@@ -45,9 +45,10 @@ class MatchedStrehl:
         unit = (diffraction_limited / diffraction_limited.sum()).astype(np.float32)[None]
         return cls(registration, float(registration.filtered(unit).max()))
 
-    def __call__(self, frames: np.ndarray, flux: np.ndarray) -> np.ndarray:
-        """Strehl ratios (k,) of frames (k, n, n) of flux (k,); NaN where the flux is not positive."""
-        peaks = self.registration.filtered(frames).max(axis=(1, 2)).astype(np.float64)
+    def __call__(self, frames: np.ndarray, flux: np.ndarray, spectra=None) -> np.ndarray:
+        """Strehl ratios (k,) of frames (k, n, n) of flux (k,), their ``spectra`` if known
+        (:class:`.registration.FrameSpectra`); NaN where the flux is not positive."""
+        peaks = self.registration.filtered(frames, spectra).max(axis=(1, 2)).astype(np.float64)
         return strehl_from(peaks, flux, self.filtered_peak)
 
 
