@@ -155,7 +155,7 @@ def simulate_priority(case):
 def lucky_mem_mb(case):
     """Memory a case's lucky job may hold [MB] at paper fidelity (10 time blocks): its
     estimate as is (``resources.lucky_memory_bytes``: the sweep's 19 detectors, 4.7 GB
-    measured), at least 3 GB (a field's replay; its memory-mapped screens not counted)."""
+    measured with ``cog`` alone; the partial sums once per registration method), at least 3 GB (a field's replay; its memory-mapped screens not counted)."""
     return mem_mb(lucky_memory_bytes(lucky_settings(STUDY, CASES, case)), 3000, margin=1.0)
 
 
