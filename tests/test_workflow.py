@@ -39,6 +39,11 @@ def write_config(workdir: Path, study: dict | None = None) -> Path:
     return path
 
 
+def baseline(path: Path) -> xr.Dataset:
+    """A case's ``lucky.nc``, its baseline registration (``cog``)."""
+    return xr.open_dataset(path).sel(registration="cog")
+
+
 def jobs_planned(result) -> list[tuple[str, str]]:
     """(rule, wildcards) of every job a dry run would execute."""
     jobs, rule = [], None
@@ -63,10 +68,10 @@ def finished_run(tmp_path_factory):
 
 def test_tiny_study_makes_every_figure_with_provenance(finished_run):
     workdir, _ = finished_run
-    for fig in ("quality", "longexp", "lgsrms", "residuals", "table", "noise", "onaxis", "paired"):
+    for fig in ("quality", "longexp", "lgsrms", "residuals", "table", "noise", "onaxis", "paired", "registration"):
         for ext in ("pdf", "png", "nc"):
             assert (workdir / "figures" / f"{fig}.{ext}").stat().st_size > 0
-    lucky = xr.open_dataset(workdir / "results" / "cases" / "good" / "lucky.nc")
+    lucky = baseline(workdir / "results" / "cases" / "good" / "lucky.nc")
     config = json.loads(lucky.attrs["config_json"])
     assert config["atmosphere"]["r0_500nm_m"] == 0.2
     assert len(lucky.attrs["config_sha256"]) == 64 and lucky.attrs["seed"] == 7
@@ -88,8 +93,8 @@ def test_a_field_star_selecting_itself_is_the_single_target_case(finished_run):
     single-target case's results; the off-axis targets, replayed rather than stored,
     get results too."""
     workdir, _ = finished_run
-    single = xr.open_dataset(workdir / "results" / "cases" / "ltao" / "lucky.nc")
-    field = xr.open_dataset(workdir / "results" / "cases" / "field" / "lucky.nc")
+    single = baseline(workdir / "results" / "cases" / "ltao" / "lucky.nc")
+    field = baseline(workdir / "results" / "cases" / "field" / "lucky.nc")
     assert field.sizes["target"] == 3 and int(field.reference_target) == 0
     compared = 0
     for name, var in single.data_vars.items():
@@ -110,7 +115,7 @@ def test_every_quality_value_carries_its_error_and_paired_differences_are_tighte
     error (per-block differences over the shared turbulence) covers it and is far
     below the unpaired one."""
     workdir, _ = finished_run
-    lucky = xr.open_dataset(workdir / "results" / "cases" / "ltao" / "lucky.nc")
+    lucky = baseline(workdir / "results" / "cases" / "ltao" / "lucky.nc")
     for metric in ("strehl", "fwhm_arcsec", "d50_arcsec"):
         assert lucky[f"{metric}_block"].sizes["block"] == 4
         error = lucky[f"{metric}_error"].sel(detector="noiseless").values
@@ -253,7 +258,7 @@ def test_a_sweep_figure_draws_every_point_and_a_new_value_reruns_only_its_case(f
     assert list(sweep.x.values) == [0.2, 0.15]
     assert list(sweep.case.values.ravel()) == ["good", "r0_r0_500nm_m-0.15"]
     for j, case in enumerate(sweep.case.values.ravel()):
-        lucky = xr.open_dataset(workdir / "results" / "cases" / case / "lucky.nc")
+        lucky = baseline(workdir / "results" / "cases" / case / "lucky.nc")
         expected = lucky.sel(criterion="strehl", detector="noiseless", fraction=[0.1, 1.0]).isel(target=0)
         for name in ("strehl", "strehl_error", "d50_arcsec"):
             np.testing.assert_array_equal(sweep[name].isel(series=0, x=j).sel(criterion="strehl").values,
@@ -277,7 +282,7 @@ def test_fits_images_read_back_with_their_header_and_flux(finished_run):
     from astropy.wcs import WCS
 
     workdir, _ = finished_run
-    lucky = xr.open_dataset(workdir / "results" / "cases" / "good" / "lucky.nc")
+    lucky = baseline(workdir / "results" / "cases" / "good" / "lucky.nc")
     with fits.open(workdir / "fits" / "good.fits") as hdus:
         per_detector = lucky.sizes["criterion"] * lucky.sizes["fraction"] + lucky.sizes["recentring"]
         assert hdus[0].header["NIMAGES"] == len(hdus) - 1 == per_detector * lucky.sizes["detector"]
@@ -312,7 +317,7 @@ def test_the_psf_gallery_shows_each_image_in_units_of_the_diffraction_limited_pe
     assert list(gallery.panel.values) == ["long exposure", "image Strehl, 100 %", "image Strehl, 10 %"]
     brightest = gallery.image.max(("y", "x")).values
     np.testing.assert_allclose(brightest, gallery.strehl.values, rtol=1e-5)
-    ltao = xr.open_dataset(workdir / "results" / "cases" / "ltao" / "lucky.nc")
+    ltao = baseline(workdir / "results" / "cases" / "ltao" / "lucky.nc")
     assert float(gallery.strehl.sel(case="ltao", panel="image Strehl, 10 %")) == float(
         ltao.strehl.sel(criterion="strehl", fraction=0.1, detector="noiseless").isel(target=0))
 
@@ -345,3 +350,25 @@ def test_the_report_has_short_captions_and_no_settings_json(finished_run):
     assert "case_configs" not in html and 'settings={' not in html
     assert "Integrated-image quality vs a swept parameter" in html
     assert "no AO, r0 20 cm" in html  # the case good, in short
+
+
+def test_registration_methods_along_their_dimension_and_the_knees(finished_run):
+    """The noise figures' case holds every registration method along ``registration`` (cog the
+    baseline among them, each frame registered or counted), the others cog alone; the
+    registration figure's dataset has a knee per curve and ``luckyao knees`` prints them."""
+    workdir, _ = finished_run
+    lgs = xr.open_dataset(workdir / "results" / "cases" / "lgs" / "lucky.nc")
+    assert list(lgs.registration.values) == ["cog", "xcorr"]
+    registered = np.isfinite(lgs.frame_registered_px).all("axis").sum("frame")
+    assert ((registered + lgs.unregistered_frames) == lgs.sizes["frame"]).all()
+    cog = lgs.sel(registration="cog")
+    np.testing.assert_array_equal(cog.frame_registered_px, cog.frame_centroid_px)
+    good = xr.open_dataset(workdir / "results" / "cases" / "good" / "lucky.nc")
+    assert list(good.registration.values) == ["cog"]
+    figure = xr.open_dataset(workdir / "figures" / "registration.nc")
+    assert list(figure.registration.values) == ["cog", "xcorr"]
+    assert figure.strehl_knee_photons.dims == ("registration", "case", "criterion", "fraction", "read_noise")
+    result = subprocess.run([sys.executable, "-m", "luckyao", "knees", str(workdir / "figures" / "registration.nc")],
+                            capture_output=True, text=True, timeout=120)
+    assert result.returncode == 0, result.stderr
+    assert "| xcorr |" in result.stdout and "| cog |" in result.stdout
