@@ -381,7 +381,7 @@ def calibration_spec(study: dict, case: dict) -> dict | None:
     the sensor, its estimator and the seeing (the mean r0; not the winds, the noise or
     the exposure time, so cases that differ only there share it)."""
     wfs = case["wfs"]
-    if not case["lgs"]["enabled"] or {**wfs_optional_defaults(), **wfs}["calibration"] == "none":
+    if not case["lgs"]["enabled"] or {**case_defaults("wfs"), **wfs}["calibration"] == "none":
         return None
     atm = case["atmosphere"]
     return {"seed": study["seed"], "telescope": case["telescope"], "lgs": case["lgs"],
@@ -398,10 +398,10 @@ def figure_default(key: str):
     return load_schema()["properties"]["figures"]["additionalProperties"]["properties"][key]["default"]
 
 
-def wfs_optional_defaults() -> dict:
-    """The schema's defaults of the ``wfs`` block's optional keys (``centroider``,
-    ``threshold``, ``calibration``): their one home."""
-    keys = load_schema()["definitions"]["case"]["properties"]["wfs"]["properties"]
+def case_defaults(block: str) -> dict:
+    """The schema's defaults of a case block's optional keys (``wfs``: ``centroider``,
+    ``threshold``, ``calibration``, ...; ``telescope``: the size-scaling parameters): their one home."""
+    keys = load_schema()["definitions"]["case"]["properties"][block]["properties"]
     return {key: spec["default"] for key, spec in keys.items() if "default" in spec}
 
 
