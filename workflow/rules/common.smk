@@ -1,4 +1,5 @@
 # Study config, validated once at the edge; lookups the rules share. No physics here.
+import os
 import re
 import shlex
 import sys
@@ -9,8 +10,8 @@ from luckyao.study.resources import (commands_memory_bytes, lucky_memory_bytes, 
                                      preflight, reconstructor_memory_bytes, simulate_memory_bytes,
                                      turbulence_memory_bytes)
 from luckyao.study.config import (ConfigError, calibration_key, calibration_spec, canonical_json, commands_key,
-                                  commands_spec, imaged_targets, lucky_settings, plausibility_warnings,
-                                  reconstructor_key, reconstructor_spec, sweep_detectors, turbulence_key,
+                                  commands_spec, imaged_targets, lgs_twin, lucky_settings, plausibility_warnings,
+                                  reconstructor_key, reconstructor_spec, sha256, sweep_detectors, turbulence_key,
                                   turbulence_spec, unused_cases, validate_study)
 from luckyao.study.sweeps import expand_sweeps, sweep_points
 
@@ -43,6 +44,7 @@ COMMANDS = {name: commands_spec(case) for name, case in CASES.items()}
 COMMANDS_BY_KEY = {commands_key(s): s for s in COMMANDS.values() if s is not None}
 CALIBRATION = {name: calibration_spec(STUDY, case) for name, case in CASES.items()}
 CALIBRATION_BY_KEY = {calibration_key(s): s for s in CALIBRATION.values() if s is not None}
+LGS_TWIN = {name: lgs_twin(STUDY, CASES, name) for name in CASES}
 LUCKYAO = ("OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1 NUMBA_NUM_THREADS=1 "
            f"{shlex.quote(sys.executable)} -m luckyao")  # every value formatted into a command is quoted (:q)
 
@@ -66,13 +68,15 @@ def calibration_file(case):
 
 
 def write_text_atomic(path, text):
-    """Write ``text`` to ``path`` through a temporary file in the same folder."""
-    import os
+    """Write ``text`` to ``path`` through a temporary file of its own in the same folder
+    (several Snakemakes parsing the workflow at once each write whole files)."""
+    import tempfile
 
     os.makedirs(os.path.dirname(path), exist_ok=True)
-    with open(f"{path}.partial", "w") as f:
+    fd, partial = tempfile.mkstemp(dir=os.path.dirname(path), prefix=os.path.basename(path), suffix=".partial")
+    with os.fdopen(fd, "w") as f:
         f.write(text)
-    os.replace(f"{path}.partial", path)
+    os.replace(partial, path)
 
 
 def frames_output(path):
