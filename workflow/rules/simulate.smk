@@ -8,7 +8,9 @@ rule simulate:
         reconstructor=lambda w: [] if LGS_TWIN[w.case] else reconstructor_file(w.case),
         commands=lambda w: commands_file(w.case),
         calibration=lambda w: [] if LGS_TWIN[w.case] else calibration_file(w.case),
-        lgs_twin=lambda w: f"results/cases/{LGS_TWIN[w.case]}/telemetry.nc" if LGS_TWIN[w.case] else [],
+        # ancient: a rerun of the twin for its AO alone changes no lgs_rms; whatever does (the LGS
+        # chain's config, screens, seed, code) is this case's own params and inputs too
+        lgs_twin=lambda w: ancient(f"results/cases/{LGS_TWIN[w.case]}/telemetry.nc") if LGS_TWIN[w.case] else [],
         code=step_sources("simulation"),
     output:
         frames=frames_output("results/cases/{case}/frames.nc"),
