@@ -150,10 +150,12 @@ def simulate_priority(case):
     """Scheduling priority of a case's simulation, 0-9 (below the lucky rule's 10): the
     cases whose post-processing is longest (detectors x targets: the detector sweep,
     then the fields) are simulated first, so their long lucky jobs run beside the other
-    simulations instead of alone at the end of the study."""
-    settings = lucky_settings(STUDY, CASES, case)
-    work = len(settings["detectors"]) * len(CASES[case]["targets_arcsec"])
-    return min(9, work // 2)
+    simulations instead of alone at the end of the study; an LGS twin (config.lgs_twin)
+    as early as the no-AO cases that wait for it."""
+    def work(name):
+        return len(lucky_settings(STUDY, CASES, name)["detectors"]) * len(CASES[name]["targets_arcsec"])
+
+    return min(9, max(work(name) for name in CASES if name == case or LGS_TWIN[name] == case) // 2)
 
 
 def lucky_mem_mb(case):
