@@ -5,6 +5,7 @@ import shlex
 import sys
 
 from luckyao.study.code_deps import step_sources
+from luckyao.study.datasets import atomic_path
 from luckyao.study.live_run import hold_shared
 from luckyao.study.resources import (commands_memory_bytes, lucky_memory_bytes, machine_memory_bytes, mem_mb,
                                      preflight, reconstructor_memory_bytes, simulate_memory_bytes,
@@ -65,18 +66,6 @@ def calibration_file(case):
     """The case's cached WFS calibration file, or [] without one."""
     spec = CALIBRATION[case]
     return f"results/calibrations/{calibration_key(spec)}.nc" if spec else []
-
-
-def write_text_atomic(path, text):
-    """Write ``text`` to ``path`` through a temporary file of its own in the same folder
-    (several Snakemakes parsing the workflow at once each write whole files)."""
-    import tempfile
-
-    os.makedirs(os.path.dirname(path), exist_ok=True)
-    fd, partial = tempfile.mkstemp(dir=os.path.dirname(path), prefix=os.path.basename(path), suffix=".partial")
-    with os.fdopen(fd, "w") as f:
-        f.write(text)
-    os.replace(partial, path)
 
 
 def frames_output(path):

@@ -13,7 +13,8 @@ def figure_settings_file(fig):
     settings = figure_settings(fig)
     path = f"results/figures/settings/{fig}_{sha256(settings)[:12]}.json"
     if not os.path.exists(path):
-        write_text_atomic(path, canonical_json(settings))
+        with atomic_path(path) as partial:
+            partial.write_text(canonical_json(settings))
     return path
 
 
