@@ -84,3 +84,69 @@ class Apodiser:
         """Transmission (n_samples,) blocking the regions with the largest mean square of
         ``residual`` (n_samples,), the tilt-removed residual phase at the pupil samples (oracle)."""
         return self.open_samples(self.regions.mean_square(self.labels, residual))
+
+
+DRIVERS = ("lgs", "true")
+"""What ranks the regions: the LGS estimate (reconstructed phase along the target less the DM
+shape, what an instrument can do) or the true residual (an oracle upper bound)."""
+
+
+@dataclass(frozen=True)
+class ApodisationSettings:
+    """``ao.apodisation``: the ``driver`` (:data:`DRIVERS`) and the ``blocked_fraction`` of the regions."""
+
+    driver: str
+    blocked_fraction: float
+
+    def __post_init__(self):
+        if self.driver not in DRIVERS:
+            raise ValueError(f"unknown apodisation driver {self.driver!r}; known: {DRIVERS}")
+
+
+class DelayedApodisation:
+    """Each WFS exposure's transmission of the science pupil samples, applied during the steps
+    that exposure's DM command is (``dm``, a :class:`.correction.DelayedDm`); the full pupil
+    before the first.
+
+    Both drivers rank the same quantity, the residual along the target during the exposure
+    less the DM shape its command makes, with piston, tip and tilt removed: from the LGS
+    (:meth:`from_estimate`, at the reconstruction points) or from the truth (:meth:`observe`,
+    the mean of the exposure's true phases at the science samples).
+    """
+
+    def __init__(self, apodiser: Apodiser, dm, tilt, point_labels=None, point_tilt=None):
+        """``tilt``: the :class:`..optics.pupil.TiltRemover` of the science samples; for the LGS
+        driver, ``point_labels`` and ``point_tilt`` of the reconstruction points."""
+        self.apodiser, self.dm, self.tilt = apodiser, dm, tilt
+        self.point_labels, self.point_tilt = point_labels, point_tilt
+        self._transmissions = {}  # exposure start step -> transmission (n_samples,) float32
+        self._full = np.ones(len(apodiser.labels), dtype=np.float32)
+        self._phase_sum = None  # the true phases of the current exposure, summed [rad at 500 nm]
+
+    def _set(self, start_step: int, region_mean_square: np.ndarray) -> None:
+        self._transmissions[start_step] = self.apodiser.open_samples(region_mean_square)
+        dm = self.dm
+        oldest = start_step - dm.delay_steps - dm.exposure_steps - dm.lookahead_steps
+        for key in [k for k in self._transmissions if k < oldest]:
+            del self._transmissions[key]
+
+    def from_estimate(self, start_step: int, estimate_m: np.ndarray, dm_at_points_m: np.ndarray) -> None:
+        """LGS driver: the exposure's reconstructed optical path along the target and the DM
+        shape of its command at the reconstruction points (n_points,) [m]."""
+        residual = self.point_tilt.residual(np.asarray(estimate_m - dm_at_points_m, dtype=np.float32))
+        self._set(start_step, self.apodiser.regions.mean_square(self.point_labels, residual))
+
+    def observe(self, step: int, phase_500: np.ndarray) -> None:
+        """Oracle driver: the target's true phase (n_samples,) [rad at 500 nm] at ``step``, steps
+        in order; at an exposure's last step its transmission is set."""
+        e = self.dm.exposure_steps
+        self._phase_sum = phase_500.astype(np.float64) if step % e == 0 else self._phase_sum + phase_500
+        if step % e == e - 1:
+            start = step - e + 1
+            residual = self.tilt.residual((self._phase_sum / e - self.dm.surface_of(start)).astype(np.float32))
+            self._set(start, self.apodiser.regions.mean_square(self.apodiser.labels, residual))
+
+    def at(self, step: int) -> np.ndarray:
+        """Transmission (n_samples,) float32 of the science pupil at ``step``."""
+        source = self.dm.source_step(step)
+        return self._transmissions[source] if source >= 0 else self._full
