@@ -17,7 +17,12 @@ setup() {
     local stamp="$VENV/.luckyao-installed"
     if [ ! -f "$stamp" ] || [ pyproject.toml -nt "$stamp" ]; then
         "$VENV/bin/python" -m pip install --quiet --upgrade pip
-        "$VENV/bin/python" -m pip install --quiet -e ".[test]"
+        # byte-compiled on both cores by compileall, not one file at a time by pip (~20 s less),
+        # with the package's own source (its editable install is not compiled, and every job
+        # imports it); a file that does not compile (as pip would) only runs uncompiled
+        "$VENV/bin/python" -m pip install --quiet --no-compile -e ".[test]"
+        "$VENV/bin/python" -m compileall -q -j 0 src \
+            "$("$VENV/bin/python" -c 'import sysconfig; print(sysconfig.get_paths()["purelib"])')" > /dev/null || true
         touch "$stamp"
     fi
 }

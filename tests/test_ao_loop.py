@@ -201,6 +201,41 @@ def test_flat_dm_changes_nothing(nine, study):
     assert corrected.true_rms_nm.values[0, :20].mean() < 0.7 * none.true_rms_nm.values[0].mean()
 
 
+# 2b ------------------------------------------------------------------------------------------
+def test_no_ao_case_takes_its_lgs_telemetry_from_its_twin(nine, study, tmp_path):
+    """A no-AO case's simulation may take each frame's ``lgs_rms`` from an AO case with the
+    same LGS chain (``config.lgs_twin``: the sensor is open loop, it never sees the DM) and
+    only image: its telemetry and frames are then bit-identical to measuring them itself.
+    The twin's file is refused when its LGS chain differs (here a 16x16 WFS) or its seed."""
+    from luckyao.study.config import lgs_twin
+    from luckyao.study.datasets import provenance, write_dataset
+    from luckyao.study.simulation import twin_lgs_rms_nm
+
+    config, cases = study
+    assert lgs_twin(config, cases, "noao_r0_15cm") == "ltao_r0_15cm"
+    assert lgs_twin(config, cases, "ltao_r0_15cm") is None  # AO cases measure their own
+    assert lgs_twin(config, {"noao_r0_15cm": cases["noao_r0_15cm"], "ltao_wfs16": cases["ltao_wfs16"]},
+                    "noao_r0_15cm") is None  # another WFS: other slopes
+
+    duration = 0.2
+    none_cfg = dict(nine.config(mode="none"), duration_s=duration)
+    ltao_cfg = dict(nine.config(mode="ltao"), duration_s=duration)
+    frames_own, frames_given = [], []
+    own = nine.simulate(none_cfg, None, frames_own)
+    twin = nine.simulate(ltao_cfg, nine.commands("ltao"))
+    path = tmp_path / "twin.nc"
+    twin.attrs.update(provenance("twin", ltao_cfg, 5))
+    write_dataset(twin, path)
+    given = simulate(Case.from_config(none_cfg), nine.screens, lambda start, f: frames_given.append(f.copy()),
+                     lgs_rms_nm=twin_lgs_rms_nm(path, none_cfg, 5))
+    assert given.identical(own)
+    np.testing.assert_array_equal(np.concatenate(frames_given, 1), np.concatenate(frames_own, 1))
+    with pytest.raises(ValueError, match="seed 6"):
+        twin_lgs_rms_nm(path, none_cfg, 6)
+    with pytest.raises(ValueError, match="LGS chain"):
+        twin_lgs_rms_nm(path, deep_merge(none_cfg, {"wfs": {"n_subapertures": 16}}), 5)
+
+
 # 3 -------------------------------------------------------------------------------------------
 class _Recorder(simulation.OpenLoopCorrection):
     """The loop's correction, recording the DM surface it applies at each science step."""

@@ -49,7 +49,7 @@ def test_tiny_study_through_a_real_slurm_equals_a_local_run():
     assert script.returncode == 0, stdout[-3000:] + stderr[-3000:]
     summary = re.search(r"SLURM run: (\d+) jobs, (\d+) through sbatch", stdout)
     local = re.search(r"(\d+) local \(([^)]*)\)", stdout)
-    assert local and set(local[2].split(", ")) <= {"all", "figure_settings", "figure", "export"}
+    assert local and set(local[2].split(", ")) <= {"all", "figure", "export"}
     assert summary and int(summary[2]) == int(summary[1]) - int(local[1]) > 0  # every job but the short local ones
     assert re.search(r"outputs equal the local run's: (\d+) of \1 netCDF", stdout)
     assert re.search(r"report.html holds (\d+) of \1 figures", stdout)

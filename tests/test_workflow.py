@@ -52,6 +52,16 @@ def jobs_planned(result) -> list[tuple[str, str]]:
     return jobs
 
 
+def planned_after_edit(workdir: Path, study: dict) -> list[tuple[str, str]]:
+    """(rule, wildcards) of every job a dry run of the edited ``study`` (an overlay over the
+    workdir's config) would execute."""
+    edited = workdir / "edited.yaml"
+    edited.write_text(yaml.safe_dump(study))
+    result = snakemake(workdir, "--dry-run", "--configfile", str(edited))
+    assert result.returncode == 0, result.stderr
+    return jobs_planned(result)
+
+
 @pytest.fixture(scope="module")
 def finished_run(tmp_path_factory):
     workdir = tmp_path_factory.mktemp("study")
@@ -134,15 +144,25 @@ def test_editing_one_case_reruns_only_that_case(finished_run):
     workdir, config = finished_run
     study = yaml.safe_load(config.read_text())
     study["cases"]["bad"]["atmosphere"]["r0_500nm_m"] = 0.12
-    edited = workdir / "edited.yaml"
-    edited.write_text(yaml.safe_dump(study))
-    result = snakemake(workdir, "--dry-run", "--configfile", str(edited))
-    assert result.returncode == 0, result.stderr
-    jobs = jobs_planned(result)
+    jobs = planned_after_edit(workdir, study)
     cases = {w for rule, w in jobs if rule in ("simulate", "lucky")}
     assert cases == {"case=bad"}
     assert not any(rule == "turbulence" for rule, _ in jobs)
     assert {w for rule, w in jobs if rule == "figure"} == {"fig=quality", "fig=longexp"}
+
+
+def test_a_no_ao_case_takes_its_lgs_rms_from_its_twin_and_survives_the_twins_ao_edits(finished_run):
+    """The no-AO case ``lgs`` takes its ``lgs_rms`` from ``ltao`` (same LGS chain): bit-identical
+    to ``ltao``'s; an edit of ``ltao``'s AO alone reruns ``ltao``, not ``lgs`` (the twin's
+    telemetry is an ``ancient`` input: what sets ``lgs_rms`` is ``lgs``'s own config)."""
+    workdir, config = finished_run
+    own = xr.open_dataset(workdir / "results" / "cases" / "lgs" / "telemetry.nc")
+    twin = xr.open_dataset(workdir / "results" / "cases" / "ltao" / "telemetry.nc")
+    np.testing.assert_array_equal(own.lgs_rms_nm.values, twin.lgs_rms_nm.values)
+    assert not np.array_equal(own.true_rms_nm.values, twin.true_rms_nm.values)  # not the same case
+    study = yaml.safe_load(config.read_text())
+    study["cases"]["ltao"]["ao"]["coupling"] = 0.25
+    assert {w for rule, w in planned_after_edit(workdir, study) if rule in ("simulate", "lucky")} == {"case=ltao"}
 
 
 def test_invalid_config_fails_before_any_job_naming_the_key(tmp_path):
@@ -260,11 +280,7 @@ def test_a_sweep_figure_draws_every_point_and_a_new_value_reruns_only_its_case(f
                                           expected[name].values)
     study = yaml.safe_load(config.read_text())
     study["sweeps"]["r0"]["parameters"]["atmosphere.r0_500nm_m"].append(0.3)
-    overlay = workdir / "more_r0.yaml"
-    overlay.write_text(yaml.safe_dump(study))
-    result = snakemake(workdir, "--dry-run", "--configfile", str(overlay))
-    assert result.returncode == 0, result.stderr
-    jobs = jobs_planned(result)
+    jobs = planned_after_edit(workdir, study)
     assert {w for rule, w in jobs if rule in ("simulate", "lucky", "export")} == {"case=r0_r0_500nm_m-0.3"}
     assert {w for rule, w in jobs if rule == "figure"} == {"fig=sweep"}
 

@@ -1,16 +1,18 @@
 # Study config, validated once at the edge; lookups the rules share. No physics here.
+import os
 import re
 import shlex
 import sys
 
 from luckyao.study.code_deps import step_sources
+from luckyao.study.datasets import atomic_path
 from luckyao.study.live_run import hold_shared
 from luckyao.study.resources import (commands_memory_bytes, lucky_memory_bytes, machine_memory_bytes, mem_mb,
                                      preflight, reconstructor_memory_bytes, simulate_memory_bytes,
                                      turbulence_memory_bytes)
 from luckyao.study.config import (ConfigError, calibration_key, calibration_spec, canonical_json, commands_key,
-                                  commands_spec, imaged_targets, lucky_settings, plausibility_warnings,
-                                  reconstructor_key, reconstructor_spec, sweep_detectors, turbulence_key,
+                                  commands_spec, imaged_targets, lgs_twin, lucky_settings, plausibility_warnings,
+                                  reconstructor_key, reconstructor_spec, sha256, sweep_detectors, turbulence_key,
                                   turbulence_spec, unused_cases, validate_study)
 from luckyao.study.sweeps import expand_sweeps, sweep_points
 
@@ -43,6 +45,7 @@ COMMANDS = {name: commands_spec(case) for name, case in CASES.items()}
 COMMANDS_BY_KEY = {commands_key(s): s for s in COMMANDS.values() if s is not None}
 CALIBRATION = {name: calibration_spec(STUDY, case) for name, case in CASES.items()}
 CALIBRATION_BY_KEY = {calibration_key(s): s for s in CALIBRATION.values() if s is not None}
+LGS_TWIN = {name: lgs_twin(STUDY, CASES, name) for name in CASES}
 LUCKYAO = ("OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1 NUMBA_NUM_THREADS=1 "
            f"{shlex.quote(sys.executable)} -m luckyao")  # every value formatted into a command is quoted (:q)
 
@@ -63,16 +66,6 @@ def calibration_file(case):
     """The case's cached WFS calibration file, or [] without one."""
     spec = CALIBRATION[case]
     return f"results/calibrations/{calibration_key(spec)}.nc" if spec else []
-
-
-def write_text_atomic(path, text):
-    """Write ``text`` to ``path`` through a temporary file in the same folder."""
-    import os
-
-    os.makedirs(os.path.dirname(path), exist_ok=True)
-    with open(f"{path}.partial", "w") as f:
-        f.write(text)
-    os.replace(f"{path}.partial", path)
 
 
 def frames_output(path):
@@ -146,10 +139,12 @@ def simulate_priority(case):
     """Scheduling priority of a case's simulation, 0-9 (below the lucky rule's 10): the
     cases whose post-processing is longest (detectors x targets: the detector sweep,
     then the fields) are simulated first, so their long lucky jobs run beside the other
-    simulations instead of alone at the end of the study."""
-    settings = lucky_settings(STUDY, CASES, case)
-    work = len(settings["detectors"]) * len(CASES[case]["targets_arcsec"])
-    return min(9, work // 2)
+    simulations instead of alone at the end of the study; an LGS twin (config.lgs_twin)
+    as early as the no-AO cases that wait for it."""
+    def work(name):
+        return len(lucky_settings(STUDY, CASES, name)["detectors"]) * len(CASES[name]["targets_arcsec"])
+
+    return min(9, max(work(name) for name in CASES if name == case or LGS_TWIN[name] == case) // 2)
 
 
 def lucky_mem_mb(case):

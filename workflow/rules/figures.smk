@@ -1,24 +1,30 @@
 # Figures and FITS images are short jobs: on a cluster they run beside Snakemake itself
 # instead of each queueing through sbatch.
-localrules: figure_settings, figure, export, all_cases
+localrules: figure, export, all_cases
 
 
-rule figure_settings:
-    """A figure's settings (its config, its cases' resolved configs, the seed) as a file, so
-    that they reach the figure job without being a (report-visible, very long) parameter;
-    rewritten, and the figure redrawn, exactly when they change."""
-    output:
-        "results/figures/{fig}.settings.json",
-    params:
-        settings=lambda w: canonical_json(figure_settings(w.fig)),
-    run:
-        write_text_atomic(output[0], params.settings)
+def figure_settings_file(fig):
+    """The file that carries a figure's settings (its config, its cases' resolved configs, the
+    seed) to its job, so that they are not a (report-visible, very long) parameter. Named by
+    their hash and written here, while the workflow is parsed, when missing: new settings are
+    a new input, so the figure is redrawn exactly when they change; a file is never
+    rewritten, so a dry run of another config cannot change one a live run reads; and no job
+    is spent on it (a rule with a run directive costs a Snakemake start-up, ~6 s, each)."""
+    settings = figure_settings(fig)
+    path = f"results/figures/settings/{fig}_{sha256(settings)[:12]}.json"
+    if not os.path.exists(path):
+        with atomic_path(path) as partial:
+            partial.write_text(canonical_json(settings))
+    return path
+
+
+FIGURE_SETTINGS = {fig: figure_settings_file(fig) for fig in STUDY["figures"]}
 
 
 rule figure:
     """One figure and the tidy dataset it is drawn from."""
     input:
-        settings="results/figures/{fig}.settings.json",
+        settings=lambda w: FIGURE_SETTINGS[w.fig],
         lucky=lambda w: figure_inputs(w.fig),
         code=step_sources("figures"),
     output:

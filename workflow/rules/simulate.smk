@@ -1,11 +1,16 @@
 rule simulate:
-    """One case's time loop: noiseless lucky frames and telemetry."""
+    """One case's time loop: noiseless lucky frames and telemetry. A no-AO case takes its
+    LGS telemetry from the AO case that measures the same slopes (config.lgs_twin), when
+    the study has one: its own loop then only images (a third of the cost)."""
     input:
         screens=lambda w: f"results/turbulence/{turbulence_key(TURBULENCE[w.case])}.npy",
         screens_metadata=lambda w: f"results/turbulence/{turbulence_key(TURBULENCE[w.case])}.nc",
-        reconstructor=lambda w: reconstructor_file(w.case),
+        reconstructor=lambda w: [] if LGS_TWIN[w.case] else reconstructor_file(w.case),
         commands=lambda w: commands_file(w.case),
-        calibration=lambda w: calibration_file(w.case),
+        calibration=lambda w: [] if LGS_TWIN[w.case] else calibration_file(w.case),
+        # ancient: a rerun of the twin for its AO alone changes no lgs_rms; whatever does (the LGS
+        # chain's config, screens, seed, code) is this case's own params and inputs too
+        lgs_twin=lambda w: ancient(f"results/cases/{LGS_TWIN[w.case]}/telemetry.nc") if LGS_TWIN[w.case] else [],
         code=step_sources("simulation"),
     output:
         frames=frames_output("results/cases/{case}/frames.nc"),
@@ -15,7 +20,8 @@ rule simulate:
         seed=STUDY["seed"],
         products=lambda w, input: ((["--reconstructor", input.reconstructor] if input.reconstructor else [])
                                    + (["--commands", input.commands] if input.commands else [])
-                                   + (["--calibration", input.calibration] if input.calibration else [])),
+                                   + (["--calibration", input.calibration] if input.calibration else [])
+                                   + (["--lgs-telemetry", input.lgs_twin] if input.lgs_twin else [])),
     threads: 1
     priority: lambda w: simulate_priority(w.case)
     resources:

@@ -27,9 +27,12 @@ import yaml
 
 from .. import __version__
 from .config import (
+    calibration_key,
+    calibration_spec,
     canonical_json,
     commands_key,
     commands_spec,
+    lgs_twin,
     load_study,
     lucky_settings,
     reconstructor_key,
@@ -122,14 +125,19 @@ def _cpu_model() -> str:
 
 
 def case_jobs(study: dict, cases: dict, case: str) -> list[str]:
-    """``step/name`` of every job ``results/cases/<case>/lucky.nc`` needs from scratch."""
-    config = cases[case]
-    jobs = [f"turbulence/{turbulence_key(turbulence_spec(study, config))}"]
-    if (spec := reconstructor_spec(config)) is not None:
-        jobs.append(f"reconstructor/{reconstructor_key(spec)}")
-    if (spec := commands_spec(config)) is not None:
-        jobs.append(f"commands/{commands_key(spec)}")
-    return jobs + [f"simulate/{case}", f"lucky/{case}"]
+    """``step/name`` of every job ``results/cases/<case>/lucky.nc`` needs from scratch: with
+    an LGS twin (``config.lgs_twin``), the twin's simulation and its products too."""
+    twin = lgs_twin(study, cases, case)
+    simulated = [twin, case] if twin else [case]
+    jobs = [f"turbulence/{turbulence_key(turbulence_spec(study, cases[case]))}"]
+    for name in simulated:
+        config = cases[name]
+        for step, spec, key in (("reconstructor", reconstructor_spec(config), reconstructor_key),
+                                ("calibration", calibration_spec(study, config), calibration_key),
+                                ("commands", commands_spec(config), commands_key)):
+            if spec is not None and (job := f"{step}/{key(spec)}") not in jobs:
+                jobs.append(job)
+    return jobs + [f"simulate/{name}" for name in simulated] + [f"lucky/{case}"]
 
 
 def _stale(path: Path, member: str, study: dict, cases: dict) -> list[str]:

@@ -21,7 +21,7 @@ from ..units import ARCSEC_RAD
 from ..wfs.beacons import LgsConfig
 from ..wfs.calibration import BeaconSeeing
 from ..wfs.shack_hartmann import ShackHartmann
-from .config import frame_count, wfs_optional_defaults
+from .config import case_defaults, frame_count
 
 
 @dataclass(frozen=True)
@@ -105,7 +105,7 @@ def lgs_from(block: dict) -> LgsConfig:
 
 def wfs_from(block: dict) -> WfsSettings:
     """The settings of a ``wfs`` block, its optional keys by default the schema's."""
-    return WfsSettings(**{**wfs_optional_defaults(), **block})
+    return WfsSettings(**{**case_defaults("wfs"), **block})
 
 
 def seeing_from(atmosphere: dict, lgs: LgsConfig) -> BeaconSeeing:

@@ -3,7 +3,8 @@
     luckyao check CONFIG [OVERLAY ...]
     luckyao turbulence --spec JSON --screens S.npy --metadata S.nc
     luckyao simulate --case JSON --name NAME --seed N --screens S.npy --screens-metadata S.nc
-                     [--reconstructor R.nc] [--commands C.nc] [--calibration W.nc] --frames F --telemetry T
+                     [--reconstructor R.nc] [--commands C.nc] [--calibration W.nc] [--lgs-telemetry T.nc]
+                     --frames F --telemetry T
     luckyao reconstructor --spec JSON --out R.nc
     luckyao calibration --spec JSON --out W.nc
     luckyao commands --spec JSON --out C.nc
@@ -64,7 +65,7 @@ def cmd_simulate(args) -> None:
     from .case import Case
     from .config import imaged_targets
     from .datasets import FrameWriter, open_dataset, provenance, write_dataset
-    from .simulation import lgs_chain, simulate
+    from .simulation import lgs_chain, simulate, twin_lgs_rms_nm
     from .turbulence import read_screens
 
     config = json.loads(args.case)
@@ -76,6 +77,7 @@ def cmd_simulate(args) -> None:
         calibration = (open_dataset(args.calibration, "WFS calibration", allow_nan=()) if args.calibration
                        else None)
         sensor, estimator = lgs_chain(case, screens, reconstructors, args.seed, calibration)
+    lgs_rms_nm = twin_lgs_rms_nm(args.lgs_telemetry, config, args.seed) if args.lgs_telemetry else None
     commands = None
     if args.commands:
         products = open_dataset(args.commands, "AO command", allow_nan=())
@@ -85,7 +87,8 @@ def cmd_simulate(args) -> None:
     start = time.perf_counter()
     with FrameWriter(args.frames, imaged, case.n_frames, case.camera.n_pixels,
                      case.camera.pixel_scale_arcsec, attrs) as writer:
-        telemetry = simulate(case, screens, writer.write, sensor, estimator, commands, imaged)
+        telemetry = simulate(case, screens, writer.write, sensor, estimator, commands, imaged,
+                             lgs_rms_nm=lgs_rms_nm)
     elapsed = time.perf_counter() - start
     steps = case.n_frames * case.steps_per_frame
     logging.getLogger(__name__).info("simulated %d steps in %.1f s: %.3f ms per step (with I/O)",
@@ -240,6 +243,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--reconstructor", default="", help="reconstructor file (cases with LGS)")
     p.add_argument("--commands", default="", help="AO command-matrix file (cases with AO)")
     p.add_argument("--calibration", default="", help="WFS calibration file (cases with wfs.calibration)")
+    p.add_argument("--lgs-telemetry", default="",
+                   help="telemetry of the AO case that measured this no-AO case's LGS rms (config.lgs_twin)")
     p.add_argument("--frames", required=True)
     p.add_argument("--telemetry", required=True)
     p.set_defaults(func=cmd_simulate)

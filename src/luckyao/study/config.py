@@ -385,7 +385,7 @@ def calibration_spec(study: dict, case: dict) -> dict | None:
     the sensor, its estimator and the seeing (the mean r0; not the winds, the noise or
     the exposure time, so cases that differ only there share it)."""
     wfs = case["wfs"]
-    if not case["lgs"]["enabled"] or {**wfs_optional_defaults(), **wfs}["calibration"] == "none":
+    if not case["lgs"]["enabled"] or {**case_defaults("wfs"), **wfs}["calibration"] == "none":
         return None
     atm = case["atmosphere"]
     return {"seed": study["seed"], "telescope": case["telescope"], "lgs": case["lgs"],
@@ -397,15 +397,39 @@ def calibration_key(spec: dict) -> str:
     return "calibration_" + sha256(spec)[:12]
 
 
+def lgs_spec(case: dict) -> dict | None:
+    """Everything of a resolved case that its LGS telemetry (each frame's ``lgs_rms``)
+    depends on besides its screens and seed (None without LGS): the case less its AO (the
+    sensor is open loop: it never sees the DM), its camera but the frame time, and its
+    reference target."""
+    if not case["lgs"]["enabled"]:
+        return None
+    spec = {key: value for key, value in case.items() if key not in ("ao", "camera", "reference_target")}
+    return {**spec, "frame_time_s": case["camera"]["frame_time_s"]}
+
+
+def lgs_twin(study: dict, cases: dict, name: str) -> str | None:
+    """The case whose simulation measures a no-AO case's LGS telemetry, so that its own
+    simulation images the science targets only: the first AO case (by name) with the same
+    :func:`lgs_spec` and screens, whose simulation measures exactly the same slopes; None
+    for a case with AO, without LGS, or with no such case."""
+    case = cases[name]
+    if case["ao"]["mode"] != "none" or (spec := lgs_spec(case)) is None:
+        return None
+    screens = turbulence_spec(study, case)
+    return next((other for other in sorted(cases) if cases[other]["ao"]["mode"] != "none"
+                 and lgs_spec(cases[other]) == spec and turbulence_spec(study, cases[other]) == screens), None)
+
+
 def figure_default(key: str):
     """The schema's default of a figure key (``detector``: ``noiseless``)."""
     return load_schema()["properties"]["figures"]["additionalProperties"]["properties"][key]["default"]
 
 
-def wfs_optional_defaults() -> dict:
-    """The schema's defaults of the ``wfs`` block's optional keys (``centroider``,
-    ``threshold``, ``calibration``): their one home."""
-    keys = load_schema()["definitions"]["case"]["properties"]["wfs"]["properties"]
+def case_defaults(block: str) -> dict:
+    """The schema's defaults of a case block's optional keys (``wfs``: ``centroider``,
+    ``threshold``, ``calibration``, ...; ``telescope``: the size-scaling parameters): their one home."""
+    keys = load_schema()["definitions"]["case"]["properties"][block]["properties"]
     return {key: spec["default"] for key, spec in keys.items() if "default" in spec}
 
 

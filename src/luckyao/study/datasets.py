@@ -18,13 +18,11 @@ import shutil
 import subprocess
 from contextlib import contextmanager
 from functools import cache
+from importlib.metadata import version
 from pathlib import Path
 
 import netCDF4
-import numba
 import numpy as np
-import pyfftw
-import scipy
 import xarray as xr
 
 from .. import __version__
@@ -50,8 +48,8 @@ def code_version() -> str:
 def provenance(title: str, config: dict, seed: int) -> dict:
     """Global attributes: the config as JSON, its sha256, code version, seed, and the
     versions of every library that shapes the numbers."""
-    libraries = {"python": platform.python_version(), "numpy": np.__version__, "scipy": scipy.__version__,
-                 "numba": numba.__version__, "pyfftw": pyfftw.__version__, "xarray": xr.__version__,
+    libraries = {"python": platform.python_version(), "numpy": np.__version__, "scipy": version("scipy"),
+                 "numba": version("numba"), "pyfftw": version("pyFFTW"), "xarray": xr.__version__,
                  "netCDF4": netCDF4.__version__, "netcdf_library": netCDF4.__netcdf4libversion__,
                  "hdf5_library": netCDF4.__hdf5libversion__}
     return {

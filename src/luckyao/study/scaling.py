@@ -25,7 +25,7 @@ import math
 
 from ..optics.pupil import Telescope
 from ..units import ARCSEC_RAD
-from .config import ConfigError, load_schema
+from .config import ConfigError, case_defaults
 
 DERIVED_KEYS = {
     "telescope.obscuration_m": "telescope.obscuration_ratio",
@@ -49,7 +49,7 @@ def _parameter(case: dict, path: str) -> float:
     value = _get(case, path)
     if value is None:
         block, key = path.split(".")
-        value = load_schema()["definitions"]["case"]["properties"][block]["properties"][key]["default"]
+        value = case_defaults(block)[key]
     return value
 
 

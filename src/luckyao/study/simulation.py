@@ -13,6 +13,8 @@
   phases is the per-frame truth. A frame is the mean of its steps' unit-flux images.
 """
 
+import json
+
 import numpy as np
 import xarray as xr
 
@@ -29,7 +31,8 @@ from ..units import ARCSEC_RAD, REFERENCE_WAVELENGTH_M, phase_rad_to_nm
 from ..wfs.sensor import LgsSensor
 from .calibration import slope_estimator
 from .case import Case
-from .datasets import require_finite
+from .config import lgs_spec
+from .datasets import open_dataset, require_finite
 
 
 def lgs_chain(case: Case, screens: ScreenSet, reconstructors: np.ndarray,
@@ -42,6 +45,18 @@ def lgs_chain(case: Case, screens: ScreenSet, reconstructors: np.ndarray,
                        wfs.photons_per_subaperture, wfs.read_noise_e)
     sensor.estimator = slope_estimator(case, sensor.wfs, sensor.elongation, calibration)
     return sensor, LgsRmsEstimator(reconstructors, sensor.n_slopes)
+
+
+def twin_lgs_rms_nm(path, config: dict, seed: int) -> np.ndarray:
+    """The ``lgs_rms_nm`` (target, frame) of the telemetry file ``path`` of a case's LGS twin
+    (:func:`luckyao.study.config.lgs_twin`), after checking that it measured them with the
+    case's own LGS chain and seed."""
+    telemetry = open_dataset(path, "LGS twin telemetry", allow_nan={"axis_strehl", "lgs_residual_rms_nm"})
+    twin = json.loads(telemetry.attrs["config_json"])
+    if lgs_spec(twin) != lgs_spec(config) or int(telemetry.attrs["seed"]) != seed:
+        raise ValueError(f"'{path}' was not measured with this case's LGS chain and seed {seed}: "
+                         f"its lgs_rms cannot stand for this case's")
+    return telemetry["lgs_rms_nm"].values
 
 
 class SciencePath:
@@ -123,11 +138,13 @@ class SciencePath:
 
 def simulate(case: Case, screens: ScreenSet, write_frames, sensor: LgsSensor | None = None,
              estimator: LgsRmsEstimator | None = None, commands: tuple[np.ndarray, np.ndarray] | None = None,
-             imaged_targets=None, block_frames: int = 32) -> xr.Dataset:
+             imaged_targets=None, block_frames: int = 32, lgs_rms_nm: np.ndarray | None = None) -> xr.Dataset:
     """Run the case; ``write_frames(start, frames (imaged target, k, n, n))`` receives the
     noiseless unit-flux frames of ``imaged_targets`` (indices into ``case.targets``,
     default all; every target gets its truth). Returns the telemetry dataset. With an LGS
-    ``sensor`` and its ``estimator``, each frame also gets its ``lgs_rms_nm``;
+    ``sensor`` and its ``estimator``, each frame also gets its ``lgs_rms_nm``; a case
+    without AO may instead be given them (target, frame), as measured by a case with the
+    same LGS chain (:func:`luckyao.study.config.lgs_twin`);
     with ``commands`` (the command matrix and the DM slopes of the case's
     ``ao`` settings, :func:`luckyao.study.reconstructor.build_commands`) the DM
     corrects every step, each frame gets its ``lgs_residual_rms_nm`` and every
@@ -163,7 +180,13 @@ def simulate(case: Case, screens: ScreenSet, write_frames, sensor: LgsSensor | N
     true_rms_nm = np.empty((n_targets, n_frames), dtype=np.float32)
     r0_frame = np.empty(n_frames)
     axis_strehl = np.full((n_targets, n_frames), np.nan, dtype=np.float32)
-    lgs_rms = np.full((n_targets, n_frames), np.nan, dtype=np.float32)
+    if lgs_rms_nm is not None:
+        if sensor is not None or commands is not None or np.shape(lgs_rms_nm) != (n_targets, n_frames):
+            raise ValueError(f"given LGS telemetry needs a case without AO or sensor and shape "
+                             f"{(n_targets, n_frames)}, got {np.shape(lgs_rms_nm)}")
+        lgs_rms = np.asarray(lgs_rms_nm, dtype=np.float32)
+    else:
+        lgs_rms = np.full((n_targets, n_frames), np.nan, dtype=np.float32)
     lgs_residual_rms = np.full((n_targets, n_frames), np.nan, dtype=np.float32)
     transmitted = np.empty(n_frames, dtype=np.float32)
     progress = Progress("frames", n_frames)
@@ -202,7 +225,7 @@ def simulate(case: Case, screens: ScreenSet, write_frames, sensor: LgsSensor | N
 
     frame_time = spf * case.time_step_s
     extra = {}
-    if sensor is not None:
+    if sensor is not None or lgs_rms_nm is not None:
         extra["lgs_rms_nm"] = (("target", "frame"), lgs_rms, {
             "units": "nm", "long_name": "tilt-removed rms of the LGS tomographic reconstruction along the "
             "target, over the frame's WFS exposures"})

@@ -13,7 +13,7 @@ import xarray as xr
 
 from ...lucky.accumulation import batch_mean_error
 from .settings import FigureSettings
-from .style import CRITERIA, LINE_STYLES, MARKERS, colour, new_figure, with_error
+from .style import CRITERIA, LINE_STYLES, MARKERS, colour, new_figure, series_fraction_lines, with_error
 
 SHOWN = {"strehl": "Strehl ratio", "d50_arcsec": "50% energy diameter [arcsec]"}
 """The integrated-image metrics drawn against the diameter (FWHM stays in the dataset)."""
@@ -91,13 +91,7 @@ def draw_quality_vs_diameter(ds: xr.Dataset, title: str):
     x = ds.diameter.values
     for r, criterion in enumerate(ds.criterion.values):
         for ax, (metric, name) in zip(axes[r], SHOWN.items()):
-            for s, series in enumerate(ds.series.values):
-                for k, fraction in enumerate(ds.fraction.values):
-                    cell = ds.sel(series=series, criterion=criterion, fraction=fraction)
-                    error = cell[f"{metric}_error"].values if f"{metric}_error" in cell else None
-                    ax.errorbar(x, cell[metric].values, yerr=error, color=colour(s), ls=LINE_STYLES[k % 4],
-                                marker=MARKERS[k % 8], ms=4, capsize=2, lw=1.2,
-                                label=f"{series}, {100 * fraction:g} %")
+            series_fraction_lines(ax, x, ds.sel(criterion=criterion), metric)
             ax.set_xlabel("telescope diameter [m]")
             ax.set_ylabel(name)
             ax.grid(alpha=0.3)

@@ -5,7 +5,8 @@ import numpy as np
 import xarray as xr
 
 from .settings import FigureSettings, case_coords
-from .style import AO_STYLE, CRITERIA, LINE_STYLES, MARKERS, METRICS, band, colour, new_figure, with_error
+from .style import (AO_STYLE, CRITERIA, LINE_STYLES, MARKERS, METRICS, band, colour, new_figure,
+                    series_fraction_lines, with_error)
 
 NOISE_DOMINATED = 0.3
 """A noisy detector's value is noise-dominated when it departs from the value of the same
@@ -207,13 +208,7 @@ def draw_quality_vs_parameter(ds: xr.Dataset, title: str):
     x = ds.x.values if numeric else np.arange(ds.sizes["x"])
     for r, criterion in enumerate(ds.criterion.values):
         for ax, metric in zip(axes[r], METRICS):
-            for s, series in enumerate(ds.series.values):
-                for k, fraction in enumerate(ds.fraction.values):
-                    cell = ds.sel(series=series, criterion=criterion, fraction=fraction)
-                    error = cell[f"{metric}_error"].values if f"{metric}_error" in cell else None
-                    ax.errorbar(x, cell[metric].values, yerr=error, color=colour(s), ls=LINE_STYLES[k % 4],
-                                marker=MARKERS[k % 8], ms=4, capsize=2, lw=1.2,
-                                label=f"{series}, {100 * fraction:g} %")
+            series_fraction_lines(ax, x, ds.sel(criterion=criterion), metric)
             if not numeric:
                 ax.set_xticks(x, ds.x.values)
             ax.set_xlabel(ds.attrs["parameter"])

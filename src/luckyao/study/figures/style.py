@@ -43,3 +43,14 @@ def band(ax, x, values: xr.Dataset, metric: str, shade: str) -> None:
 def with_error(datasets, metric: str) -> list[str]:
     """``metric`` and, when every case's lucky dataset has it, its Monte-Carlo error."""
     return [metric] + ([f"{metric}_error"] if all(f"{metric}_error" in ds for ds in datasets) else [])
+
+
+def series_fraction_lines(ax, x, ds, metric: str) -> None:
+    """``ds[metric]`` (series, fraction) against ``x`` with its ``<metric>_error`` bars when
+    present: a colour per series, a line style and marker per fraction."""
+    for s, series in enumerate(ds.series.values):
+        for k, fraction in enumerate(ds.fraction.values):
+            cell = ds.sel(series=series, fraction=fraction)
+            error = cell[f"{metric}_error"].values if f"{metric}_error" in cell else None
+            ax.errorbar(x, cell[metric].values, yerr=error, color=colour(s), ls=LINE_STYLES[k % 4],
+                        marker=MARKERS[k % 8], ms=4, capsize=2, lw=1.2, label=f"{series}, {100 * fraction:g} %")
