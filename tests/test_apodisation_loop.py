@@ -38,7 +38,7 @@ def loop():
     return run
 
 
-@pytest.mark.parametrize("driver", ["lgs", "true"])
+@pytest.mark.parametrize("driver", ["lgs", "oracle"])
 def test_nothing_blocked_changes_nothing(loop, driver):
     """blocked_fraction 0: a transmission of ones multiplies the field by 1.0 exactly, so the frames
     and the truth are bit-identical to the case without apodisation."""
@@ -51,7 +51,7 @@ def test_nothing_blocked_changes_nothing(loop, driver):
     np.testing.assert_array_equal(apodised.transmitted_flux.values, 1.0)
 
 
-@pytest.mark.parametrize("driver", ["lgs", "true"])
+@pytest.mark.parametrize("driver", ["lgs", "oracle"])
 def test_frame_flux_is_the_transmitted_flux(loop, driver):
     """A quarter of the 60 sub-aperture squares blocked (15): once the first command applies, each
     frame's flux is its recorded transmitted flux (flux proportional to the open area), about
@@ -82,6 +82,6 @@ def test_config_key_checked():
 def test_replay_of_an_apodised_case_refused():
     _, cases = load_study("config/config.yaml")
     case = Case.from_config(deep_merge(cases["ltao_r0_13.5cm"], {"ao": {"apodisation": {
-        "driver": "true", "blocked_fraction": 0.2}}}))
+        "driver": "oracle", "blocked_fraction": 0.2}}}))
     with pytest.raises(ValueError, match="apodis"):
         next(Replay(case, None, [0], None)())

@@ -86,7 +86,7 @@ class Apodiser:
         return self.open_samples(self.regions.mean_square(self.labels, residual))
 
 
-DRIVERS = ("lgs", "true")
+DRIVERS = ("lgs", "oracle")
 """What ranks the regions: the LGS estimate (reconstructed phase along the target less the DM
 shape, what an instrument can do) or the true residual (an oracle upper bound)."""
 

@@ -122,7 +122,7 @@ class SciencePath:
         x, y = x[self.imager.mask], y[self.imager.mask]
         regions = SubapertureRegions(case.telescope.diameter_m, case.wfs.n_subapertures)
         apodiser = Apodiser(regions, x, y, settings.blocked_fraction)
-        self._oracle = settings.driver == "true"
+        self._oracle = settings.driver == "oracle"
         if self._oracle:
             return DelayedApodisation(apodiser, dm, self.tilt)
         points = self.reconstruction_points()
