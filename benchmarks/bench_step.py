@@ -17,7 +17,8 @@ processes so their peak memory is their own: the reconstructor and the command m
 time, peak RSS), then the whole time loop (ms per step, median of ``--repeats`` runs, with
 its peak RSS: the products loaded, the screens of the steps, a block of frames), and the
 files a case of the default duration writes (the study's estimates, study/resources.py).
-Printed as a table and one JSON line per diameter (``size {...}``).
+Printed as a table and one JSON line per diameter (``size {...}``); then each quantity's fitted
+power law a D^b with its value at 39 m, and the study's own file-size estimates at 39 m.
 """
 
 import argparse
@@ -257,6 +258,33 @@ def main_sizes(config_path: str, diameters, repeats: int) -> None:
         print(f"| {d:g} | {r['n_subapertures']} | {r['n_actuators']} | {r['camera_pixels']} | {r['ms_per_step']:.2f} | "
               f"{r['loop_peak_gb']:.2f} | {r['reconstructor_s']:.1f} | {r['commands_s']:.1f} | "
               f"{r['products_peak_gb']:.2f} | {r['frames_gb']:.2f} | {r['screens_gb']:.2f} |")
+    if len(rows) > 1:
+        print_power_laws(list(rows.values()), PROJECTED_DIAMETER_M)
+        print(f"the study's size estimates at {PROJECTED_DIAMETER_M:g} m: "
+              + json.dumps(case_files_gb(config_path, PROJECTED_DIAMETER_M)))
+
+
+SCALED = {"ms_per_step": "ms/step", "loop_peak_gb": "loop peak RSS [GB]", "reconstructor_s": "reconstructor [s]",
+          "commands_s": "command matrix [s]", "products_peak_gb": "their peak RSS [GB]", "frames_gb": "frames [GB]",
+          "screens_gb": "screens [GB]"}
+PROJECTED_DIAMETER_M = 39.0
+"""The ELT's diameter: the size the power laws are projected to."""
+
+
+def power_law(diameters_m, values) -> tuple[float, float]:
+    """Least-squares fit of log value = log a + b log D: (a, b)."""
+    b, log_a = np.polyfit(np.log(diameters_m), np.log(values), 1)
+    return float(np.exp(log_a)), float(b)
+
+
+def print_power_laws(rows: list[dict], projected_m: float) -> None:
+    """Each measured quantity's fitted power law a D^b and its value at ``projected_m``."""
+    diameters = [r["diameter_m"] for r in rows]
+    print(f"| quantity | exponent b (a D^b) | at {projected_m:g} m |")
+    print("|---|---|---|")
+    for key, label in SCALED.items():
+        a, b = power_law(diameters, [r[key] for r in rows])
+        print(f"| {label} | {b:.2f} | {a * projected_m ** b:.3g} |")
 
 
 if __name__ == "__main__":

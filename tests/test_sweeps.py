@@ -63,6 +63,20 @@ def test_expanding_twice_changes_nothing():
     assert expand_sweeps(once) == once
 
 
+def test_a_key_the_overrides_add_can_be_swept():
+    """``ao.apodisation`` is absent from base (no apodisation): the sweep's overrides add it,
+    so its keys are swept; without the overrides the path is refused by key."""
+    apodised = {"lgs": {"enabled": True},
+                "ao": {"mode": "ltao", "apodisation": {"driver": "lgs", "blocked_fraction": 0.0}}}
+    parameters = {"ao.apodisation.blocked_fraction": [0.0, 0.2], "ao.apodisation.driver": ["lgs", "oracle"]}
+    cases = validate_study(with_sweep(parameters, overrides=apodised))
+    points = sweep_points(with_sweep(parameters, overrides=apodised), "grid")
+    assert [p.case for p in points][-1] == "grid_blocked_fraction-0.2_driver-oracle"
+    assert cases[points[-1].case]["ao"]["apodisation"] == {"driver": "oracle", "blocked_fraction": 0.2}
+    with pytest.raises(ConfigError, match=r"sweeps\.grid\.parameters\.ao\.apodisation\.driver"):
+        validate_study(with_sweep({"ao.apodisation.driver": ["lgs"]}))
+
+
 def test_two_parameters_with_one_last_part_are_named_by_their_paths():
     study = with_sweep({"camera.wavelength_m": [8e-7], "lgs.wavelength_m": [5.89e-7]})
     assert [p.case for p in sweep_points(study, "grid")] == ["grid_camera.wavelength_m-8e-07_lgs.wavelength_m-5.89e-07"]

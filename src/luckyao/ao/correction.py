@@ -56,19 +56,23 @@ class DelayedDm:
         for key in [k for k in self._commands if k < oldest]:
             del self._commands[key], self._surfaces[key]
 
-    def _source(self, step: int) -> int:
+    def source_step(self, step: int) -> int:
         """Start step of the exposure whose command is applied at ``step`` (< 0: none yet)."""
         return (step - self.delay_steps) // self.exposure_steps * self.exposure_steps
 
     def commands_at(self, step: int) -> np.ndarray:
         """Commands (n_act,) [m] applied at ``step``."""
-        source = self._source(step)
+        source = self.source_step(step)
         return self._commands[source] if source >= 0 else self._flat_commands
 
     def surface_at(self, step: int) -> np.ndarray:
         """DM surface (n_samples,) [rad at 500 nm] at the science pupil samples at ``step``."""
-        source = self._source(step)
+        source = self.source_step(step)
         return self._surfaces[source] if source >= 0 else self._flat_surface
+
+    def surface_of(self, start_step: int) -> np.ndarray:
+        """DM surface (n_samples,) [rad at 500 nm] of the command of the exposure starting at ``start_step``."""
+        return self._surfaces[start_step]
 
 
 class OpenLoopCorrection:

@@ -3,7 +3,10 @@
 For the field ``E = exp(i phi)`` on the ``n_valid`` samples of an N x N pupil
 mask (zero elsewhere), zero-padded to M x M (M >= 2N), the far-field
 intensity of unit total flux is ``I = |FFT_M(E)|^2 / (M^2 n_valid)``
-(Parseval: ``sum |FFT_M(E)|^2 = M^2 n_valid``).
+(Parseval: ``sum |FFT_M(E)|^2 = M^2 n_valid``). An apodised pupil,
+``E = t exp(i phi)`` with a transmission ``t`` on the samples, keeps the same
+scale: its flux is ``sum t^2 / n_valid`` of the full pupil's (the flux lost is
+in the image).
 
 The 2D FFT runs as batches of 1D FFTs along contiguous rows (FFTW):
 
@@ -74,13 +77,19 @@ class FarField:
         self._fft_y = pyfftw.FFTW(field_t, rows, axes=(1,), flags=flags, threads=1)
         self._fft_x = pyfftw.FFTW(block, self._spectrum, axes=(1,), flags=flags, threads=1)
 
-    def accumulate(self, phase_rad: np.ndarray, out: np.ndarray) -> None:
-        """Add the intensity of each phase row (k, n_valid) [rad], float32, to ``out`` (k, M, M) float32."""
+    def accumulate(self, phase_rad: np.ndarray, out: np.ndarray, transmission: np.ndarray | None = None) -> None:
+        """Add the intensity of each phase row (k, n_valid) [rad], float32, to ``out`` (k, M, M) float32;
+        ``transmission`` (k, n_valid) float32 apodises each row (None: the full pupil)."""
         m = self.fft_size
         if out.shape != (len(phase_rad), m, m) or out.dtype != np.float32:
             raise ValueError(f"out must be float32 of shape {(len(phase_rad), m, m)}")
-        for phase, image in zip(phase_rad, out):
+        if transmission is not None and np.shape(transmission) != np.shape(phase_rad):
+            raise ValueError(f"transmission must have the phases' shape {np.shape(phase_rad)}")
+        for k, (phase, image) in enumerate(zip(phase_rad, out)):
             cos_sin(phase, self._cos, self._sin)
+            if transmission is not None:
+                self._cos *= transmission[k]
+                self._sin *= transmission[k]
             _scatter(self._cos, self._sin, self._sample, self._index, self._field_flat)
             self._fft_y.execute()
             for row0, source, head in self._blocks:

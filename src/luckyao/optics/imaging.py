@@ -69,15 +69,17 @@ class Imager:
     def _far_field(self) -> FarField:
         return FarField(self.mask, self.fft_size)
 
-    def accumulate(self, phase_rad: np.ndarray, out: np.ndarray) -> None:
+    def accumulate(self, phase_rad: np.ndarray, out: np.ndarray, transmission: np.ndarray | None = None) -> None:
         """Add to ``out`` (k, M, M) float32 the unshifted, unbinned intensity of each phase row
-        (k, n_valid) [rad] on the mask: ``|FFT_M(exp(i phi))|^2 / (M^2 n_valid)`` (farfield)."""
-        self._far_field.accumulate(np.asarray(phase_rad, dtype=np.float32), out)
+        (k, n_valid) [rad] on the mask: ``|FFT_M(t exp(i phi))|^2 / (M^2 n_valid)`` (farfield),
+        ``t`` the ``transmission`` (k, n_valid) of an apodised pupil (None: 1)."""
+        self._far_field.accumulate(np.asarray(phase_rad, dtype=np.float32), out, transmission)
 
-    def intensity(self, phase_rad: np.ndarray) -> np.ndarray:
-        """Unshifted, unbinned intensities (k, M, M) float32, each of unit total flux."""
+    def intensity(self, phase_rad: np.ndarray, transmission: np.ndarray | None = None) -> np.ndarray:
+        """Unshifted, unbinned intensities (k, M, M) float32, each of unit total flux for the full
+        pupil (``sum t^2 / n_valid`` with a ``transmission`` t)."""
         out = np.zeros((len(phase_rad), self.fft_size, self.fft_size), dtype=np.float32)
-        self.accumulate(phase_rad, out)
+        self.accumulate(phase_rad, out, transmission)
         return out
 
     def to_pixels(self, intensity: np.ndarray) -> np.ndarray:
@@ -91,9 +93,10 @@ class Imager:
         rolled = np.roll(shifted, (q - 1) // 2, axis=(-2, -1))
         return rolled.reshape(*shifted.shape[:-2], n, q, n, q).sum(axis=(-3, -1))
 
-    def image(self, phase_rad: np.ndarray) -> np.ndarray:
-        """Detector images (k, n, n) float32 of unit flux for phases (k, n_valid) [rad]."""
-        return self.to_pixels(self.intensity(phase_rad))
+    def image(self, phase_rad: np.ndarray, transmission: np.ndarray | None = None) -> np.ndarray:
+        """Detector images (k, n, n) float32 for phases (k, n_valid) [rad], of unit flux for the
+        full pupil (see :meth:`intensity` for a ``transmission``)."""
+        return self.to_pixels(self.intensity(phase_rad, transmission))
 
     @cached_property
     def diffraction_limited(self) -> np.ndarray:

@@ -10,6 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..ao.apodisation import ApodisationSettings
 from ..ao.dm import DeformableMirror
 from ..atmosphere.statistics import Layer, R0Schedule
 from ..geometry import LineOfSight
@@ -72,6 +73,7 @@ class AoSettings:
     delay_steps: int
     correction_direction_arcsec: tuple[float, float]
     glao_max_height_m: float
+    apodisation: ApodisationSettings | None = None
 
     @property
     def enabled(self) -> bool:
@@ -87,7 +89,9 @@ class AoSettings:
 
 
 def ao_from(block: dict) -> AoSettings:
-    return AoSettings(**{**block, "correction_direction_arcsec": tuple(block["correction_direction_arcsec"])})
+    apodisation = block.get("apodisation")
+    return AoSettings(**{**block, "correction_direction_arcsec": tuple(block["correction_direction_arcsec"]),
+                         "apodisation": None if apodisation is None else ApodisationSettings(**apodisation)})
 
 
 def telescope_from(block: dict) -> Telescope:

@@ -126,6 +126,9 @@ def _check_case(name: str, case: dict, turbulence: dict) -> None:
         if case["ao"]["delay_steps"] < case["wfs"]["exposure_steps"]:
             raise ConfigError(f"config key '{where}.ao.delay_steps': a command cannot be applied before its "
                               f"exposure ends (at least wfs.exposure_steps = {case['wfs']['exposure_steps']})")
+    if "apodisation" in case["ao"] and case["ao"]["mode"] == "none":
+        raise ConfigError(f"config key '{where}.ao.apodisation': needs ao.mode ltao or glao (it is applied with "
+                          "each exposure's DM command)")
     if case["telescope"]["obscuration_m"] >= case["telescope"]["diameter_m"]:
         raise ConfigError(f"config key '{where}.telescope.obscuration_m': must be below diameter_m")
     reference = case.get("reference_target")
@@ -370,7 +373,8 @@ def commands_spec(case: dict) -> dict | None:
     targets or the atmosphere, so cases that differ only there share it."""
     if case["ao"]["mode"] == "none":
         return None
-    return {key: case[key] for key in ("telescope", "lgs", "wfs", "tomography", "ao")}
+    ao = {key: value for key, value in case["ao"].items() if key != "apodisation"}  # not in the commands
+    return {**{key: case[key] for key in ("telescope", "lgs", "wfs", "tomography")}, "ao": ao}
 
 
 def commands_key(spec: dict) -> str:

@@ -108,7 +108,7 @@ def lucky_case(settings_config: dict, frames_path, telemetry_path, out_path, scr
     ds["recentred_long_exposure_strehl_error"] = (("registration", "target", "detector"), recentred, {
         "units": "1", "long_name": f"Monte-Carlo standard error of the recentred long-exposure Strehl, "
                                    f"from {n_blocks} batch means"})
-    for name in ("true_rms_nm", "lgs_rms_nm", "lgs_residual_rms_nm"):
+    for name in ("true_rms_nm", "lgs_rms_nm", "lgs_residual_rms_nm", "transmitted_flux"):
         if name in telemetry:
             ds[name] = telemetry[name]
     ds["mean_r0_500nm_m"] = ((), float(telemetry.r0_500nm_m.mean()),

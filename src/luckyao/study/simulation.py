@@ -18,6 +18,7 @@ import json
 import numpy as np
 import xarray as xr
 
+from ..ao.apodisation import Apodiser, DelayedApodisation, SubapertureRegions
 from ..ao.correction import DelayedDm, OpenLoopCorrection
 from ..atmosphere.screens import ScreenSet
 from ..optics.imaging import Imager
@@ -25,6 +26,7 @@ from ..optics.propagation import Propagator
 from ..optics.pupil import TiltRemover
 from ..progress import Progress
 from ..tomography.criterion import LgsRmsEstimator, lucky_frame_rms_nm
+from ..tomography.reconstructor import pupil_points
 from ..units import ARCSEC_RAD, REFERENCE_WAVELENGTH_M, phase_rad_to_nm
 from ..wfs.sensor import LgsSensor
 from .calibration import slope_estimator
@@ -74,6 +76,7 @@ class SciencePath:
         self.to_camera = np.float32(REFERENCE_WAVELENGTH_M / case.camera.wavelength_m)
         self._all_imaged = self.imaged == list(range(len(self.targets)))
         self._intensity = np.empty((len(self.imaged), imager.fft_size, imager.fft_size), dtype=np.float32)
+        self._oracle, self.transmitted_flux = False, 1.0
 
     def dm_surface(self):
         """The DM surface function at this path's pupil samples (the case must have AO)."""
@@ -81,24 +84,56 @@ class SciencePath:
         return ao.deformable_mirror(telescope).grid_surface(self.imager.grid, self.imager.mask)
 
     def frame(self, frame: int, steps: np.ndarray, layer_scales: np.ndarray, dm=None,
-              truth: bool = True) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
-        """The frame's unit-flux images (imaged, n, n) float32 (the mean of its steps' images),
-        their value on the axis (imaged,) (:meth:`Imager.axis_value`) and, with ``truth``, the
-        tilt-removed rms (targets,) [rad at 500 nm] of its residual phases; ``dm`` (anything
-        with ``surface_at(step)``) corrects every step."""
+              truth: bool = True, apodisation: DelayedApodisation | None = None
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+        """The frame's images (imaged, n, n) float32 (the mean of its steps' images, of unit
+        flux for the full pupil), their value on the axis (imaged,) (:meth:`Imager.axis_value`)
+        and, with ``truth``, the tilt-removed rms (targets,) [rad at 500 nm] of its residual
+        phases over the whole pupil; ``dm`` (anything with ``surface_at(step)``) corrects every
+        step, ``apodisation`` (with the oracle driver fed the first target's true phases here)
+        apodises it: the transmitted flux of the frame is then :attr:`transmitted_flux`."""
         self._intensity.fill(0.0)
         rms2 = np.zeros(len(self.targets)) if truth else None
         phases = self.propagator.sample_valid(steps, layer_scales)  # (k, n_targets, n_valid)
         require_finite(phases, f"science phases of frame {frame}", "phase", ("step", "target", "sample"))
+        transmission, self.transmitted_flux = None, 0.0
         for step, phase_500 in zip(steps, phases):
+            if apodisation is not None:
+                if self._oracle:
+                    apodisation.observe(int(step), phase_500[0])
+                transmission = apodisation.at(int(step))
+                self.transmitted_flux += float(np.mean(transmission)) / len(steps)
             if dm is not None:
                 phase_500 = phase_500 - dm.surface_at(int(step))
             imaged = phase_500 if self._all_imaged else phase_500[self.imaged]
-            self.imager.accumulate(imaged * self.to_camera, self._intensity)
+            self.imager.accumulate(imaged * self.to_camera, self._intensity,
+                                   None if transmission is None else np.broadcast_to(transmission, imaged.shape))
             if truth:
                 rms2 += self.tilt.rms(phase_500) ** 2
         images = self.imager.to_pixels(self._intensity / self.case.steps_per_frame)
         return images, self.imager.axis_value(images), None if rms2 is None else np.sqrt(rms2 / self.case.steps_per_frame)
+
+    def apodisation(self, dm: DelayedDm) -> DelayedApodisation | None:
+        """The case's adaptive apodisation of this path's pupil, timed by ``dm`` (None without)."""
+        settings, case = self.case.ao.apodisation, self.case
+        if settings is None:
+            return None
+        x, y = self.imager.grid.xy_m
+        x, y = x[self.imager.mask], y[self.imager.mask]
+        regions = SubapertureRegions(case.telescope.diameter_m, case.wfs.n_subapertures)
+        apodiser = Apodiser(regions, x, y, settings.blocked_fraction)
+        self._oracle = settings.driver == "oracle"
+        if self._oracle:
+            return DelayedApodisation(apodiser, dm, self.tilt)
+        points = self.reconstruction_points()
+        return DelayedApodisation(apodiser, dm, self.tilt, regions.labels(points[:, 0], points[:, 1]),
+                                  TiltRemover(points[:, 0], points[:, 1]))
+
+    def reconstruction_points(self) -> np.ndarray:
+        """The LGS reconstructors' pupil points (n_points, 2) [m] (``study.reconstructor``)."""
+        case = self.case
+        pitch_m = case.shack_hartmann().subaperture_m / case.tomography.points_per_subaperture
+        return pupil_points(case.telescope, pitch_m)[2]
 
 
 def simulate(case: Case, screens: ScreenSet, write_frames, sensor: LgsSensor | None = None,
@@ -125,11 +160,16 @@ def simulate(case: Case, screens: ScreenSet, write_frames, sensor: LgsSensor | N
     imaged = list(range(n_targets)) if imaged_targets is None else sorted(imaged_targets)
     science = SciencePath(case, screens, range(n_targets), imaged)
     imager = science.imager
-    correction = None
+    correction = apodisation = None
     if commands is not None:
         correction = OpenLoopCorrection(*commands, science.dm_surface(), sensor.exposure_steps,
                                         case.ao.delay_steps, spf)
         dm_commands = np.empty((n_frames * spf // sensor.exposure_steps, correction.dm.n_actuators), np.float32)
+        apodisation = science.apodisation(correction.dm)
+        if apodisation is not None and apodisation.point_labels is not None:  # LGS driver
+            points = science.reconstruction_points()
+            dm_at_points = case.ao.deformable_mirror(case.telescope).influence_matrix(
+                points[:, 0], points[:, 1]).astype(np.float32)  # (n_points, n_act) [m / m]
     steps_max = science.propagator.n_steps_max
     if sensor is not None:
         steps_max = min(steps_max, sensor.n_steps_max)
@@ -148,6 +188,7 @@ def simulate(case: Case, screens: ScreenSet, write_frames, sensor: LgsSensor | N
     else:
         lgs_rms = np.full((n_targets, n_frames), np.nan, dtype=np.float32)
     lgs_residual_rms = np.full((n_targets, n_frames), np.nan, dtype=np.float32)
+    transmitted = np.empty(n_frames, dtype=np.float32)
     progress = Progress("frames", n_frames)
     buffer = np.empty((len(imaged), block_frames, n_pix, n_pix), dtype=np.float32)
     for start in range(0, n_frames, block_frames):
@@ -167,10 +208,16 @@ def simulate(case: Case, screens: ScreenSet, write_frames, sensor: LgsSensor | N
                 if correction is not None:
                     for start_step, exposure in zip(starts, slopes):
                         dm_commands[start_step // e] = correction.measure(int(start_step), exposure)
+                        if apodisation is not None and apodisation.point_labels is not None:
+                            apodisation.from_estimate(int(start_step), estimator.reconstructors[0] @ exposure.ravel(),
+                                                      dm_at_points @ dm_commands[start_step // e])
                     residual = np.stack([correction.residual_slopes(int(s), exposure)
                                          for s, exposure in zip(starts, slopes)])
                     lgs_residual_rms[:, frame] = lucky_frame_rms_nm(estimator.rms_nm(residual))
-            buffer[:, j], axis_strehl[imaged, frame], rms = science.frame(frame, steps, layer_scales, correction)
+            buffer[:, j], axis_strehl[imaged, frame], rms = science.frame(frame, steps, layer_scales, correction,
+                                                                          apodisation=apodisation)
+            if apodisation is not None:
+                transmitted[frame] = science.transmitted_flux
             true_rms_nm[:, frame] = phase_rad_to_nm(rms, REFERENCE_WAVELENGTH_M)
             r0_frame[frame] = np.mean(case.r0.r0_m(steps * case.time_step_s))
         write_frames(start, buffer[:, :count])
@@ -186,6 +233,11 @@ def simulate(case: Case, screens: ScreenSet, write_frames, sensor: LgsSensor | N
         extra["lgs_residual_rms_nm"] = (("target", "frame"), lgs_residual_rms, {
             "units": "nm", "long_name": "tilt-removed rms of the LGS pseudo-closed-loop reconstruction (open-loop "
             "slopes less the DM's) along the target, over the frame's WFS exposures"})
+        if apodisation is not None:
+            extra["transmitted_flux"] = (("frame",), transmitted, {
+                "units": "1", "long_name": "flux through the adaptively apodised pupil over the full pupil's, "
+                f"mean over the frame's steps (blocked fraction of the pupil area: 1 minus it); driver "
+                f"{case.ao.apodisation.driver}"})
         extra["dm_commands_m"] = (("exposure", "actuator"), dm_commands, {
             "units": "m", "long_name": "DM commands of each WFS exposure (applied from delay_steps after its "
             "start), valid actuators"})
@@ -233,6 +285,9 @@ class Replay:
 
     def __call__(self):
         case = self.case
+        if case.ao.apodisation is not None:
+            raise ValueError("replaying an adaptively apodised case (ao.apodisation) is not supported: image all "
+                             "its targets in the simulation")
         spf, exposure_steps = case.steps_per_frame, case.wfs.exposure_steps
         science = SciencePath(case, self.screens, self.targets, range(len(self.targets)))
         dm = None

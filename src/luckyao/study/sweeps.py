@@ -67,7 +67,7 @@ def _check_path(base: dict, path: str, where: str) -> None:
     node = base
     for part in path.split("."):
         if not isinstance(node, dict) or part not in node:
-            raise ConfigError(f"config key '{where}': '{path}' is not a key of base")
+            raise ConfigError(f"config key '{where}': '{path}' is not a key of base (or of the sweep's overrides)")
         node = node[part]
     if isinstance(node, dict):
         raise ConfigError(f"config key '{where}': '{path}' is a block of base, not a value")
@@ -79,8 +79,9 @@ def sweep_points(config: dict, sweep: str) -> list[SweepPoint]:
     spec = config["sweeps"][sweep]
     parameters = spec["parameters"]
     paths = list(parameters)
+    swept = deep_merge(config["base"], spec.get("overrides", {}))  # a key the overrides add may be swept
     for path in paths:
-        _check_path(config["base"], path, f"sweeps.{sweep}.parameters.{path}")
+        _check_path(swept, path, f"sweeps.{sweep}.parameters.{path}")
     labels = _labels(paths)
     existing = {}
     for name, override in config.get("cases", {}).items():

@@ -4,6 +4,7 @@ off-axis distance, vs a swept parameter, and paired differences between cases.""
 import numpy as np
 import xarray as xr
 
+from ...lucky.accumulation import batch_mean_error
 from .settings import FigureSettings, case_coords
 from .style import (AO_STYLE, CRITERIA, LINE_STYLES, MARKERS, METRICS, band, colour, new_figure,
                     series_fraction_lines, with_error)
@@ -189,6 +190,16 @@ def quality_vs_parameter_data(settings: FigureSettings, datasets) -> xr.Dataset:
             data[name] = (dims, table, dict(datasets[0][name].attrs))
     leaf = {p: p.rsplit(".", 1)[-1] for p in others}
     label = [", ".join(f"{leaf[p]} {v}" for p, v in zip(others, key)) or "all" for key in series]
+    if all("transmitted_flux" in ds for ds in datasets):  # apodised cases: the pupil's blocked flux
+        lost, error = np.full((len(series), len(x_values)), np.nan), np.full((len(series), len(x_values)), np.nan)
+        for s, key in enumerate(series):
+            for j, x in enumerate(x_values):
+                ds = datasets[where[(key, x)]]
+                lost[s, j], error[s, j] = flux_lost(ds.transmitted_flux.values, ds.sizes.get("block", 0))
+        data["flux_lost"] = (("series", "x"), lost, {
+            "units": "1", "long_name": "mean fraction of the source's flux blocked by the apodisation"})
+        data["flux_lost_error"] = (("series", "x"), error, {
+            "units": "1", "long_name": "Monte-Carlo standard error of flux_lost (time blocks, batch means)"})
     cases = [[points[where[(key, x)]][0] for x in x_values] for key in series]
     numeric = all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in x_values)
     return xr.Dataset(data, coords={
@@ -200,10 +211,19 @@ def quality_vs_parameter_data(settings: FigureSettings, datasets) -> xr.Dataset:
         attrs={"detector": settings.detector, "parameter": parameter, "sweep": settings.sweep})
 
 
+def flux_lost(transmitted_flux: np.ndarray, n_blocks: int) -> tuple[float, float]:
+    """1 - the mean transmitted flux per frame, and its batch-means error over ``n_blocks``
+    time blocks (NaN with fewer than two)."""
+    lost = 1.0 - np.asarray(transmitted_flux, dtype=float)
+    return float(lost.mean()), batch_mean_error(lost, n_blocks) if n_blocks >= 2 else np.nan
+
+
 def draw_quality_vs_parameter(ds: xr.Dataset, title: str):
-    n_rows = ds.sizes["criterion"]
-    fig = new_figure(13, 3.6 * n_rows + 1.0)
-    axes = fig.subplots(n_rows, 3, squeeze=False)
+    """A row per criterion: Strehl, FWHM and d50 vs the parameter (a colour per series, a line
+    style per fraction); with apodised cases a fourth column, the flux lost (first row)."""
+    n_rows, flux = ds.sizes["criterion"], "flux_lost" in ds
+    fig = new_figure(13 + 4 * flux, 3.6 * n_rows + 1.0)
+    axes = fig.subplots(n_rows, 3 + flux, squeeze=False)
     numeric = ds.x.dtype.kind in "iuf"
     x = ds.x.values if numeric else np.arange(ds.sizes["x"])
     for r, criterion in enumerate(ds.criterion.values):
@@ -216,6 +236,18 @@ def draw_quality_vs_parameter(ds: xr.Dataset, title: str):
             ax.grid(alpha=0.3)
         letter = f"({chr(ord('a') + r)}) " if n_rows > 1 else ""
         axes[r, 0].set_title(f"{letter}selection by {CRITERIA.get(criterion, criterion)}", loc="left", fontsize=10)
+        if flux:
+            axes[r, 3].set_visible(r == 0)
+    if flux:
+        ax = axes[0, 3]
+        for s, series in enumerate(ds.series.values):
+            cell = ds.sel(series=series)
+            ax.errorbar(x, cell.flux_lost.values, yerr=cell.flux_lost_error.values, color=colour(s), marker="o",
+                        ms=4, capsize=2, lw=1.2)
+        ax.set_xlabel(ds.attrs["parameter"])
+        ax.set_ylabel("flux lost (fraction of the source's)")
+        ax.set_title("flux blocked by the apodisation", loc="left", fontsize=9)
+        ax.grid(alpha=0.3)
     fig.legend(*axes[0, 0].get_legend_handles_labels(), loc="outside lower center", ncol=ds.sizes["fraction"],
                fontsize=8, title="colour: the sweep's other parameters; line style and marker: fraction of frames "
                                  "selected\nerror bars: ±1 Monte-Carlo standard error", title_fontsize=8)
