@@ -6,28 +6,14 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-import xarray as xr
 
 from luckyao.study.config import load_study, validate_study
 from luckyao.study.figures import FIGURE_KINDS, FigureSettings
 from luckyao.study.sweeps import expand_sweeps, sweep_points
+from synthetic import lucky_dataset
 
 CONFIG = Path(__file__).resolve().parents[1] / "config"
 N_FRAMES, N_BLOCKS = 100, 5
-
-
-def lucky_dataset(strehl_value: float, transmitted_flux: np.ndarray) -> xr.Dataset:
-    """The variables a quality_vs_parameter figure reads from an apodised case's lucky.nc."""
-    dims = ("target", "criterion", "fraction", "detector")
-    shape = (1, 2, 3, 1)
-    data = {}
-    for metric in ("strehl", "fwhm_arcsec", "d50_arcsec"):
-        data[metric] = (dims, np.full(shape, strehl_value), {"units": "1", "long_name": metric})
-        data[f"{metric}_error"] = (dims, np.full(shape, 0.01), {"units": "1", "long_name": "error"})
-    data["transmitted_flux"] = (("frame",), transmitted_flux)
-    data["strehl_block"] = (("block",), np.zeros(N_BLOCKS))
-    return xr.Dataset(data, coords={"criterion": ["strehl", "lgs_rms"], "fraction": [0.01, 0.1, 1.0],
-                                    "detector": ["noiseless"]})
 
 
 @pytest.fixture(scope="module")
@@ -40,7 +26,7 @@ def figure():
                                          "sweep_points": points})
     rng = np.random.default_rng(2)
     fluxes = [1.0 - rng.uniform(0, p[1]["ao.apodisation.blocked_fraction"] * 1.5, N_FRAMES) for p in points]
-    datasets = [lucky_dataset(k / 10, f) for k, f in enumerate(fluxes)]
+    datasets = [lucky_dataset(k / 10, N_BLOCKS, transmitted_flux=f) for k, f in enumerate(fluxes)]
     make_data, draw = FIGURE_KINDS["quality_vs_parameter"]
     return points, cases, fluxes, make_data(settings, datasets), draw
 

@@ -5,27 +5,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-import xarray as xr
 
 from luckyao.study.config import load_study, validate_study
 from luckyao.study.figures import FIGURE_KINDS, FigureSettings
+from synthetic import lucky_dataset
 
 CONFIG = Path(__file__).resolve().parents[1] / "config"
 N_FRAMES, N_BLOCKS = 100, 5
-
-
-def lucky_dataset(strehl_value: float, frame_strehl: np.ndarray) -> xr.Dataset:
-    """The variables a quality_vs_diameter figure reads from a lucky.nc."""
-    dims = ("target", "criterion", "fraction", "detector")
-    shape = (1, 2, 3, 1)
-    data = {}
-    for metric in ("strehl", "fwhm_arcsec", "d50_arcsec"):
-        data[metric] = (dims, np.full(shape, strehl_value), {"units": "1", "long_name": metric})
-        data[f"{metric}_error"] = (dims, np.full(shape, 0.01), {"units": "1", "long_name": "error"})
-    data["frame_strehl"] = (("target", "detector", "frame"), frame_strehl[None, None, :])
-    data["strehl_block"] = (("block",), np.zeros(N_BLOCKS))
-    return xr.Dataset(data, coords={"criterion": ["strehl", "lgs_rms"], "fraction": [0.01, 0.1, 1.0],
-                                    "detector": ["noiseless"]})
 
 
 @pytest.fixture(scope="module")
@@ -36,7 +22,7 @@ def figure():
     settings = FigureSettings.from_dict({**spec, "case_configs": {c: cases[c] for c in spec["cases"]}})
     rng = np.random.default_rng(1)
     frames = [rng.uniform(0, 0.3, N_FRAMES) for _ in spec["cases"]]
-    datasets = [lucky_dataset(k / 10, f) for k, f in enumerate(frames)]
+    datasets = [lucky_dataset(k / 10, N_BLOCKS, frame_strehl=f) for k, f in enumerate(frames)]
     make_data, draw = FIGURE_KINDS["quality_vs_diameter"]
     return spec, frames, make_data(settings, datasets), draw
 
@@ -78,6 +64,6 @@ def test_two_cases_at_one_point_are_refused():
     names = ["ltao_r0_13.5cm", "ltao_r0_15cm"]  # both LTAO, 22 km, 4.2 m
     settings = FigureSettings.from_dict({"kind": "quality_vs_diameter", "cases": names, "criteria": ["strehl"],
                                          "fractions": [0.1], "case_configs": {c: cases[c] for c in names}})
-    datasets = [lucky_dataset(0.1, np.zeros(N_FRAMES)) for _ in names]
+    datasets = [lucky_dataset(0.1, N_BLOCKS, frame_strehl=np.zeros(N_FRAMES)) for _ in names]
     with pytest.raises(ValueError, match="both LTAO, LGS 22 km at 4.2 m"):
         FIGURE_KINDS["quality_vs_diameter"][0](settings, datasets)

@@ -125,8 +125,7 @@ class DelayedApodisation:
 
     def _set(self, start_step: int, region_mean_square: np.ndarray) -> None:
         self._transmissions[start_step] = self.apodiser.open_samples(region_mean_square)
-        dm = self.dm
-        oldest = start_step - dm.delay_steps - dm.exposure_steps - dm.lookahead_steps
+        oldest = self.dm.oldest_needed(start_step)
         for key in [k for k in self._transmissions if k < oldest]:
             del self._transmissions[key]
 

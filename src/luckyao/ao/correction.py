@@ -52,9 +52,14 @@ class DelayedDm:
         self._commands[start_step] = commands
         # in rad at the reference wavelength, that of the stored phases
         self._surfaces[start_step] = (self.surface(commands) * (2 * np.pi / REFERENCE_WAVELENGTH_M)).astype(np.float32)
-        oldest = start_step - self.delay_steps - self.exposure_steps - self.lookahead_steps
+        oldest = self.oldest_needed(start_step)
         for key in [k for k in self._commands if k < oldest]:
             del self._commands[key], self._surfaces[key]
+
+    def oldest_needed(self, start_step: int) -> int:
+        """The oldest exposure start step whose command may still be applied once the exposure
+        starting at ``start_step`` is known (older ones can be dropped)."""
+        return start_step - self.delay_steps - self.exposure_steps - self.lookahead_steps
 
     def source_step(self, step: int) -> int:
         """Start step of the exposure whose command is applied at ``step`` (< 0: none yet)."""

@@ -16,7 +16,7 @@ import numpy as np
 import xarray as xr
 
 from ..ao.control import command_matrix, dm_slopes_matrix
-from ..tomography.reconstructor import factorize, pupil_points, target_reconstructor
+from ..tomography.reconstructor import factorize, reconstruction_points, target_reconstructor
 from ..tomography.slopes import SlopeGeometry, slope_covariance
 from .case import ao_from, lgs_from, targets_from, telescope_from, tomography_from, wfs_from
 
@@ -31,7 +31,7 @@ def build_reconstructors(spec: dict) -> xr.Dataset:
     tomography = tomography_from(spec["tomography"])
     prior, noise_rad = tomography.prior, tomography.noise_rms_rad
     geometry = SlopeGeometry.from_wfs(wfs, lgs)
-    _, _, points = pupil_points(telescope, wfs.subaperture_m / tomography.points_per_subaperture)
+    points = reconstruction_points(telescope, wfs.subaperture_m, tomography.points_per_subaperture)
     start = time.perf_counter()
     cholesky = factorize(slope_covariance(prior, geometry, noise_rad))
     log.info("%d slopes: covariance factorised in %.1f s", geometry.n_slopes, time.perf_counter() - start)

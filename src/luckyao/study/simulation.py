@@ -26,7 +26,7 @@ from ..optics.propagation import Propagator
 from ..optics.pupil import TiltRemover
 from ..progress import Progress
 from ..tomography.criterion import LgsRmsEstimator, lucky_frame_rms_nm
-from ..tomography.reconstructor import pupil_points
+from ..tomography.reconstructor import reconstruction_points
 from ..units import ARCSEC_RAD, REFERENCE_WAVELENGTH_M, phase_rad_to_nm
 from ..wfs.sensor import LgsSensor
 from .calibration import slope_estimator
@@ -132,8 +132,8 @@ class SciencePath:
     def reconstruction_points(self) -> np.ndarray:
         """The LGS reconstructors' pupil points (n_points, 2) [m] (``study.reconstructor``)."""
         case = self.case
-        pitch_m = case.shack_hartmann().subaperture_m / case.tomography.points_per_subaperture
-        return pupil_points(case.telescope, pitch_m)[2]
+        return reconstruction_points(case.telescope, case.shack_hartmann().subaperture_m,
+                                     case.tomography.points_per_subaperture)
 
 
 def simulate(case: Case, screens: ScreenSet, write_frames, sensor: LgsSensor | None = None,

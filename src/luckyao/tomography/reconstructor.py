@@ -23,6 +23,12 @@ def apply_inverse(cholesky_lower: np.ndarray, cross_cov: np.ndarray) -> np.ndarr
     return scipy.linalg.cho_solve((cholesky_lower, True), cross_cov.T).T
 
 
+def reconstruction_points(telescope: Telescope, subaperture_m: float, points_per_subaperture: int) -> np.ndarray:
+    """The reconstructors' points (n_points, 2) [m]: the pupil at the sub-aperture pitch over
+    ``points_per_subaperture`` (:func:`pupil_points`)."""
+    return pupil_points(telescope, subaperture_m / points_per_subaperture)[2]
+
+
 def pupil_points(telescope: Telescope, pitch_m: float) -> tuple[PupilGrid, np.ndarray, np.ndarray]:
     """Grid of ``pitch_m`` over the pupil: ``(grid, mask (n, n), xy (n_valid, 2) [m])``."""
     grid = telescope.grid_for(pitch_m)

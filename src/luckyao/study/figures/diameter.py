@@ -109,7 +109,7 @@ def draw_quality_vs_diameter(ds: xr.Dataset, title: str):
     ax.set_ylim(0, 1)
     ax.set_xlabel("telescope diameter [m]")
     ax.set_ylabel("fraction of frames")
-    ax.set_title("probability of a lucky frame (short-exposure Strehl above a threshold)", loc="left", fontsize=9)
+    ax.set_title("probability of a lucky frame\n(short-exposure Strehl above a threshold)", loc="left", fontsize=9)
     ax.grid(alpha=0.3)
     ax.legend(fontsize=7)
     fig.legend(*axes[0, 0].get_legend_handles_labels(), loc="outside lower center", ncol=ds.sizes["fraction"],
