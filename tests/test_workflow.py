@@ -185,13 +185,24 @@ def test_a_hard_kill_mid_study_is_recovered_by_the_study_command(finished_run, t
     """SIGKILL of Snakemake and its jobs while a simulation runs leaves a stale lock;
     the README's study command (``run.sh study``) alone then finishes the study, leaves
     no ``*.partial`` file, and gives the numbers of an uninterrupted run (the same
-    tiny study in ``finished_run``)."""
+    tiny study in ``finished_run``). The killed study is that run with one case's
+    results, logs and figures taken away (copied with their times and Snakemake's records),
+    so only that case and its figures run again."""
+    done, config = finished_run
     workdir = tmp_path / "killed"
-    write_config(workdir)
+    shutil.copytree(done, workdir, symlinks=True)  # copy2: modification times kept
+    shutil.rmtree(workdir / "results" / "cases" / "good")
+    figures = [fig for fig, spec in yaml.safe_load(config.read_text())["figures"].items()
+               if "good" in (spec.get("cases") or [])]
+    assert figures
+    for path in [*workdir.glob("logs/*/good.log"), *(p for fig in figures for p in workdir.glob(f"figures/{fig}.*"))]:
+        path.unlink()
+    assert not list((workdir / "results").rglob("*.partial"))
     command = ["bash", str(REPO / "run.sh"), "study", "-d", str(workdir), "--cores", "2"]
     first = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+    simulating = workdir / "logs" / "simulate" / "good.log"
     deadline = time.monotonic() + 300
-    while time.monotonic() < deadline and not list((workdir / "logs" / "simulate").glob("*.log")):
+    while time.monotonic() < deadline and not simulating.exists():
         time.sleep(0.2)
     time.sleep(1.0)  # inside the time loop
     os.killpg(first.pid, signal.SIGKILL)
@@ -199,8 +210,8 @@ def test_a_hard_kill_mid_study_is_recovered_by_the_study_command(finished_run, t
     assert any((workdir / ".snakemake" / "locks").iterdir()), "the kill left no lock: the test proves nothing"
     result = subprocess.run(command, capture_output=True, text=True, timeout=600)
     assert result.returncode == 0, result.stderr[-3000:]
+    assert "case=good" in result.stdout + result.stderr, "the recovery did not run the killed case again"
     assert not list((workdir / "results").rglob("*.partial"))
-    done, _ = finished_run
     compared = sorted((done / "results" / "cases").glob("*/lucky.nc")) + sorted((done / "figures").glob("*.nc"))
     assert compared
     for path in compared:
