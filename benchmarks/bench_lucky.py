@@ -22,8 +22,12 @@ disk), with its elapsed time and the process's peak resident memory.
 With ``--frames-file results/cases/ltao_r0_13.5cm/frames.nc`` (after the default study) the frames
 are that case's first 256 instead (real AO-corrected frames).
 
+With ``--registrations NAME ...`` the frames are registered by those methods (``lucky.registration``;
+default all four, as the paper's sweep cases), in one run (``lucky.run_lucky_methods``: the methods
+share the passes over the frames, as the study runs them); ``--registrations cog`` times ``cog`` alone.
+
 Run: .venv/bin/python benchmarks/bench_lucky.py [--frames 256] [--cube 25000] [--repeats 1] [--blocks 10]
-     [--frames-file FRAMES.nc]
+     [--frames-file FRAMES.nc] [--registrations cog windowed_cog peak xcorr]
 """
 
 import os
@@ -40,10 +44,11 @@ from pathlib import Path  # noqa: E402
 import numpy as np  # noqa: E402
 
 from luckyao.atmosphere.statistics import von_karman_psd  # noqa: E402
-from luckyao.lucky import pipeline  # noqa: E402
+from luckyao.lucky import method_run  # noqa: E402
 from luckyao.lucky.detector import Detector  # noqa: E402
-from luckyao.lucky.pipeline import run_lucky  # noqa: E402
+from luckyao.lucky.pipeline import run_lucky_methods  # noqa: E402
 from luckyao.lucky.ranking import ExternalCriterion  # noqa: E402
+from luckyao.lucky.registration import REGISTRATIONS, Registration  # noqa: E402
 from luckyao.optics.imaging import Camera, Imager  # noqa: E402
 from luckyao.optics.pupil import Telescope  # noqa: E402
 
@@ -121,7 +126,7 @@ def tiled(frames: np.ndarray, n_frames: int):
 
 
 SCORING = {"s": 0.0, "images": 0}
-_score = pipeline.score_partial_sums
+_score = method_run.score_partial_sums
 
 
 def _timed_score(partial, *args, **kwargs):
@@ -133,16 +138,22 @@ def _timed_score(partial, *args, **kwargs):
     return out
 
 
-pipeline.score_partial_sums = _timed_score
+method_run.score_partial_sums = _timed_score
 
 
-def run(frames: np.ndarray, n_frames: int, n_blocks: int = 0) -> float:
+def registration(name: str) -> Registration:
+    """The registration method ``name`` for the benchmark's camera (as ``LuckySettings.registration_methods``)."""
+    im = imager()
+    return Registration(name, im.diffraction_limited, 800e-9 / 4.2 / im.camera.pixel_scale_rad)
+
+
+def run(frames: np.ndarray, n_frames: int, n_blocks: int = 0, methods=("cog",)) -> float:
     im = imager()
     SCORING.update(s=0.0, images=0)
     t0 = time.perf_counter()
-    run_lucky(tiled(frames, n_frames), n_frames, sweep(), FRACTIONS, im.diffraction_limited_peak,
-              im.camera.pixel_scale_arcsec, 1, criteria_external=externals(n_frames), n_blocks=n_blocks,
-              progress_interval_s=60)
+    run_lucky_methods(tiled(frames, n_frames), n_frames, sweep(), FRACTIONS, im.diffraction_limited_peak,
+                      im.camera.pixel_scale_arcsec, 1, criteria_external=externals(n_frames), n_blocks=n_blocks,
+                      progress_interval_s=60, registrations=[registration(name) for name in methods])
     return time.perf_counter() - t0
 
 
@@ -152,14 +163,18 @@ def main() -> None:
     parser.add_argument("--cube", type=int, default=0, help="frames of a real run too (0: none)")
     parser.add_argument("--repeats", type=int, default=1)
     parser.add_argument("--blocks", type=int, default=0, help="time blocks (n_blocks of run_lucky; 0: none)")
+    parser.add_argument("--registrations", nargs="+", default=list(REGISTRATIONS), choices=REGISTRATIONS,
+                        help="registration methods, in one run (lucky.registration; default all four)")
     parser.add_argument("--frames-file", default=None,
                         help="a study's frames.nc: its first 256 frames (of target 0) instead of the generated ones")
     args = parser.parse_args()
     frames = cached_frames(GENERATED) if args.frames_file is None else study_frames(args.frames_file)
     n_det = len(sweep())
     half = args.frames // 4
+    print(f"registrations {' '.join(args.registrations)}")
     for _ in range(args.repeats):
-        t_half, t_full = run(frames, half, args.blocks), run(frames, args.frames, args.blocks)
+        t_half = run(frames, half, args.blocks, args.registrations)
+        t_full = run(frames, args.frames, args.blocks, args.registrations)
         print(f"scoring_s_{args.frames} {SCORING['s']:.2f} ({SCORING['images']} images, "
               f"{SCORING['s'] / max(SCORING['images'], 1) * 1e3:.2f} ms each)")
         per_frame = (t_full - t_half) / (args.frames - half)
@@ -171,7 +186,7 @@ def main() -> None:
         print(f"detector_frames_per_s {n_det / per_frame:.1f}")
         print(f"extrapolated_s_{TARGET_FRAMES} {fixed + TARGET_FRAMES * per_frame:.0f}")
     if args.cube:
-        elapsed = run(frames, args.cube, args.blocks)
+        elapsed = run(frames, args.cube, args.blocks, args.registrations)
         print(f"cube_frames {args.cube}")
         print(f"cube_seconds {elapsed:.1f}")
         print(f"peak_rss_mb {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:.0f}")

@@ -193,3 +193,52 @@ def test_a_chunk_is_detected_only_while_its_sums_are_held():
     with pytest.raises(RuntimeError, match="replaced"):
         chunk.detect(Detector("a", 100.0, 1.0), 5, 0)
     np.testing.assert_array_equal(noise.prepare(first).detect(Detector("a", 100.0, 1.0), 5, 0)[0], frames)
+
+
+def _emccd_frames(lam: float, detector: Detector, k: int = 200, n: int = 64) -> np.ndarray:
+    """k detected frames of a uniform image with ``lam`` mean photo-electrons per pixel."""
+    frames = np.full((k, n, n), 1.0 / n**2, np.float32)
+    return KeyedNoise(n, k).prepare(frames).detect(detector, 3, 0)[0].astype(np.float64)
+
+
+@pytest.mark.parametrize("lam, read_noise_e", [(0.2, 0.1), (3.0, 0.1), (3.0, 1.0)])
+def test_emccd_output_has_the_gain_registers_mean_and_excess_noise(lam, read_noise_e):
+    """Input-referred EMCCD pixel: Gamma(Poisson(lam), 1) + Normal(0, sigma): mean lam and variance
+    2 lam + sigma^2 (excess-noise factor sqrt 2), each within 5 standard errors (the variance's from
+    the fourth central moment, measured); the same detector without the register has lam + sigma^2."""
+    n = 64
+    em = Detector("em", lam * n**2, read_noise_e, electron_multiplying=True)
+    values = _emccd_frames(lam, em).ravel()
+    m = values.size
+    centred = values - values.mean()
+    variance = 2 * lam + read_noise_e**2
+    assert values.mean() == pytest.approx(lam, abs=5 * np.sqrt(variance / m))
+    assert np.mean(centred**2) == pytest.approx(variance, abs=5 * np.sqrt(np.var(centred**2) / m))
+    plain = _emccd_frames(lam, Detector("em", lam * n**2, read_noise_e)).ravel()
+    assert np.var(plain) == pytest.approx(lam + read_noise_e**2, rel=0.05)
+
+
+def test_photon_counting_probability_against_theory():
+    """Thresholded EMCCD pixel: P(1) = sum_n Poisson(n; lam) P(Gamma(n, 1) + Normal(0, sigma) > t)
+    (n = 0: the read noise alone), within 5 standard errors of the binomial fraction."""
+    from scipy import integrate, stats
+
+    lam, sigma, threshold, n = 0.15, 0.2, 0.6, 64
+    detector = Detector("pc", lam * n**2, sigma, electron_multiplying=True, photon_counting_threshold_e=threshold)
+    values = _emccd_frames(lam, detector)
+    assert set(np.unique(values)) <= {0.0, 1.0}
+    expected = stats.poisson.pmf(0, lam) * stats.norm.sf(threshold / sigma)
+    for electrons in range(1, 30):
+        above = integrate.quad(lambda x: stats.gamma.pdf(x, electrons) * stats.norm.sf((threshold - x) / sigma),
+                               0, np.inf)[0]
+        expected += stats.poisson.pmf(electrons, lam) * above
+    p = values.mean()
+    assert p == pytest.approx(expected, abs=5 * np.sqrt(expected * (1 - expected) / values.size))
+    assert p < lam  # coincidence and threshold losses: fewer counts than photons
+
+
+def test_emccd_options_are_checked_by_name():
+    with pytest.raises(ValueError, match="'pc'.*threshold"):
+        Detector("pc", 100.0, 0.1, photon_counting_threshold_e=0.5)
+    with pytest.raises(ValueError, match="'em'.*noiseless"):
+        Detector("em", None, 0.0, electron_multiplying=True)

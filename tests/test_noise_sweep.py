@@ -30,3 +30,6 @@ def test_only_the_cases_a_noise_figure_shows_pay_for_the_sweep():
     without = lucky_settings(study, cases, "good")["detectors"]
     assert swept <= set(with_sweep) and {"noiseless", "faint"} <= set(with_sweep)
     assert set(without) == {"noiseless", "faint"}
+    # the registration methods too: every one where the sweep is drawn, cog alone elsewhere
+    assert lucky_settings(study, cases, "lgs")["registration"] == ["cog", "xcorr"]
+    assert lucky_settings(study, cases, "good")["registration"] == ["cog"]

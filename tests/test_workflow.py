@@ -39,6 +39,11 @@ def write_config(workdir: Path, study: dict | None = None) -> Path:
     return path
 
 
+def baseline(path: Path) -> xr.Dataset:
+    """A case's ``lucky.nc``, its baseline registration (``cog``)."""
+    return xr.open_dataset(path).sel(registration="cog")
+
+
 def jobs_planned(result) -> list[tuple[str, str]]:
     """(rule, wildcards) of every job a dry run would execute."""
     jobs, rule = [], None
@@ -73,10 +78,10 @@ def finished_run(tmp_path_factory):
 
 def test_tiny_study_makes_every_figure_with_provenance(finished_run):
     workdir, _ = finished_run
-    for fig in ("quality", "longexp", "lgsrms", "residuals", "table", "noise", "onaxis", "paired"):
+    for fig in ("quality", "longexp", "lgsrms", "residuals", "table", "noise", "onaxis", "paired", "registration"):
         for ext in ("pdf", "png", "nc"):
             assert (workdir / "figures" / f"{fig}.{ext}").stat().st_size > 0
-    lucky = xr.open_dataset(workdir / "results" / "cases" / "good" / "lucky.nc")
+    lucky = baseline(workdir / "results" / "cases" / "good" / "lucky.nc")
     config = json.loads(lucky.attrs["config_json"])
     assert config["atmosphere"]["r0_500nm_m"] == 0.2
     assert len(lucky.attrs["config_sha256"]) == 64 and lucky.attrs["seed"] == 7
@@ -98,8 +103,8 @@ def test_a_field_star_selecting_itself_is_the_single_target_case(finished_run):
     single-target case's results; the off-axis targets, replayed rather than stored,
     get results too."""
     workdir, _ = finished_run
-    single = xr.open_dataset(workdir / "results" / "cases" / "ltao" / "lucky.nc")
-    field = xr.open_dataset(workdir / "results" / "cases" / "field" / "lucky.nc")
+    single = baseline(workdir / "results" / "cases" / "ltao" / "lucky.nc")
+    field = baseline(workdir / "results" / "cases" / "field" / "lucky.nc")
     assert field.sizes["target"] == 3 and int(field.reference_target) == 0
     compared = 0
     for name, var in single.data_vars.items():
@@ -120,7 +125,7 @@ def test_every_quality_value_carries_its_error_and_paired_differences_are_tighte
     error (per-block differences over the shared turbulence) covers it and is far
     below the unpaired one."""
     workdir, _ = finished_run
-    lucky = xr.open_dataset(workdir / "results" / "cases" / "ltao" / "lucky.nc")
+    lucky = baseline(workdir / "results" / "cases" / "ltao" / "lucky.nc")
     for metric in ("strehl", "fwhm_arcsec", "d50_arcsec"):
         assert lucky[f"{metric}_block"].sizes["block"] == 4
         error = lucky[f"{metric}_error"].sel(detector="noiseless").values
@@ -180,13 +185,24 @@ def test_a_hard_kill_mid_study_is_recovered_by_the_study_command(finished_run, t
     """SIGKILL of Snakemake and its jobs while a simulation runs leaves a stale lock;
     the README's study command (``run.sh study``) alone then finishes the study, leaves
     no ``*.partial`` file, and gives the numbers of an uninterrupted run (the same
-    tiny study in ``finished_run``)."""
+    tiny study in ``finished_run``). The killed study is that run with one case's
+    results, logs and figures taken away (copied with their times and Snakemake's records),
+    so only that case and its figures run again."""
+    done, config = finished_run
     workdir = tmp_path / "killed"
-    write_config(workdir)
+    shutil.copytree(done, workdir, symlinks=True)  # copy2: modification times kept
+    shutil.rmtree(workdir / "results" / "cases" / "good")
+    figures = [fig for fig, spec in yaml.safe_load(config.read_text())["figures"].items()
+               if "good" in (spec.get("cases") or [])]
+    assert figures
+    for path in [*workdir.glob("logs/*/good.log"), *(p for fig in figures for p in workdir.glob(f"figures/{fig}.*"))]:
+        path.unlink()
+    assert not list((workdir / "results").rglob("*.partial"))
     command = ["bash", str(REPO / "run.sh"), "study", "-d", str(workdir), "--cores", "2"]
     first = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+    simulating = workdir / "logs" / "simulate" / "good.log"
     deadline = time.monotonic() + 300
-    while time.monotonic() < deadline and not list((workdir / "logs" / "simulate").glob("*.log")):
+    while time.monotonic() < deadline and not simulating.exists():
         time.sleep(0.2)
     time.sleep(1.0)  # inside the time loop
     os.killpg(first.pid, signal.SIGKILL)
@@ -194,8 +210,8 @@ def test_a_hard_kill_mid_study_is_recovered_by_the_study_command(finished_run, t
     assert any((workdir / ".snakemake" / "locks").iterdir()), "the kill left no lock: the test proves nothing"
     result = subprocess.run(command, capture_output=True, text=True, timeout=600)
     assert result.returncode == 0, result.stderr[-3000:]
+    assert "case=good" in result.stdout + result.stderr, "the recovery did not run the killed case again"
     assert not list((workdir / "results").rglob("*.partial"))
-    done, _ = finished_run
     compared = sorted((done / "results" / "cases").glob("*/lucky.nc")) + sorted((done / "figures").glob("*.nc"))
     assert compared
     for path in compared:
@@ -273,7 +289,7 @@ def test_a_sweep_figure_draws_every_point_and_a_new_value_reruns_only_its_case(f
     assert list(sweep.x.values) == [0.2, 0.15]
     assert list(sweep.case.values.ravel()) == ["good", "r0_r0_500nm_m-0.15"]
     for j, case in enumerate(sweep.case.values.ravel()):
-        lucky = xr.open_dataset(workdir / "results" / "cases" / case / "lucky.nc")
+        lucky = baseline(workdir / "results" / "cases" / case / "lucky.nc")
         expected = lucky.sel(criterion="strehl", detector="noiseless", fraction=[0.1, 1.0]).isel(target=0)
         for name in ("strehl", "strehl_error", "d50_arcsec"):
             np.testing.assert_array_equal(sweep[name].isel(series=0, x=j).sel(criterion="strehl").values,
@@ -293,7 +309,7 @@ def test_fits_images_read_back_with_their_header_and_flux(finished_run):
     from astropy.wcs import WCS
 
     workdir, _ = finished_run
-    lucky = xr.open_dataset(workdir / "results" / "cases" / "good" / "lucky.nc")
+    lucky = baseline(workdir / "results" / "cases" / "good" / "lucky.nc")
     with fits.open(workdir / "fits" / "good.fits") as hdus:
         per_detector = lucky.sizes["criterion"] * lucky.sizes["fraction"] + lucky.sizes["recentring"]
         assert hdus[0].header["NIMAGES"] == len(hdus) - 1 == per_detector * lucky.sizes["detector"]
@@ -328,7 +344,7 @@ def test_the_psf_gallery_shows_each_image_in_units_of_the_diffraction_limited_pe
     assert list(gallery.panel.values) == ["long exposure", "image Strehl, 100 %", "image Strehl, 10 %"]
     brightest = gallery.image.max(("y", "x")).values
     np.testing.assert_allclose(brightest, gallery.strehl.values, rtol=1e-5)
-    ltao = xr.open_dataset(workdir / "results" / "cases" / "ltao" / "lucky.nc")
+    ltao = baseline(workdir / "results" / "cases" / "ltao" / "lucky.nc")
     assert float(gallery.strehl.sel(case="ltao", panel="image Strehl, 10 %")) == float(
         ltao.strehl.sel(criterion="strehl", fraction=0.1, detector="noiseless").isel(target=0))
 
@@ -361,3 +377,25 @@ def test_the_report_has_short_captions_and_no_settings_json(finished_run):
     assert "case_configs" not in html and 'settings={' not in html
     assert "Integrated-image quality vs a swept parameter" in html
     assert "no AO, r0 20 cm" in html  # the case good, in short
+
+
+def test_registration_methods_along_their_dimension_and_the_knees(finished_run):
+    """The noise figures' case holds every registration method along ``registration`` (cog the
+    baseline among them, each frame registered or counted), the others cog alone; the
+    registration figure's dataset has a knee per curve and ``luckyao knees`` prints them."""
+    workdir, _ = finished_run
+    lgs = xr.open_dataset(workdir / "results" / "cases" / "lgs" / "lucky.nc")
+    assert list(lgs.registration.values) == ["cog", "xcorr"]
+    registered = np.isfinite(lgs.frame_registered_px).all("axis").sum("frame")
+    assert ((registered + lgs.unregistered_frames) == lgs.sizes["frame"]).all()
+    cog = lgs.sel(registration="cog")
+    np.testing.assert_array_equal(cog.frame_registered_px, cog.frame_centroid_px)
+    good = xr.open_dataset(workdir / "results" / "cases" / "good" / "lucky.nc")
+    assert list(good.registration.values) == ["cog"]
+    figure = xr.open_dataset(workdir / "figures" / "registration.nc")
+    assert list(figure.registration.values) == ["cog", "xcorr"]
+    assert figure.strehl_knee_photons.dims == ("registration", "case", "criterion", "fraction", "read_noise")
+    result = subprocess.run([sys.executable, "-m", "luckyao", "knees", str(workdir / "figures" / "registration.nc")],
+                            capture_output=True, text=True, timeout=120)
+    assert result.returncode == 0, result.stderr
+    assert "| xcorr |" in result.stdout and "| cog |" in result.stdout

@@ -24,7 +24,7 @@ from pathlib import Path
 
 import xarray as xr
 
-from .study.config import ConfigError, load_study as _load_study, validate_study
+from .study.config import SIGNAL_KINDS, ConfigError, load_study as _load_study, validate_study
 
 __all__ = ["open_case", "open_telemetry", "open_figure", "draw", "load_study", "run_case", "export_fits"]
 
@@ -115,7 +115,7 @@ def run_case(study: dict, case, name: str = "explore", workdir=None) -> xr.Datas
         raise ConfigError(f"run_case: no case {case!r} in the study; give its name or a dict of overrides of base")
     # the case alone, with the figures that change its post-processing (the detector sweep)
     signal = {f: dict(v, cases=[name]) for f, v in study.get("figures", {}).items()
-              if v["kind"] == "quality_vs_signal" and name in v.get("cases", [])}
+              if v["kind"] in SIGNAL_KINDS and name in v.get("cases", [])}
     study = {**{k: v for k, v in study.items() if k != "sweeps"}, "cases": {name: study["cases"][name]},
              "figures": signal}
     cases = validate_study(study)

@@ -8,7 +8,9 @@
 * Lucky-camera detector noise: target ``t`` of a case uses the seed ``seed + t``
   (:func:`target_seed`), and frame ``f`` of detector ``name`` draws from compiled streams keyed
   by ``(seed + t, detector_key(name), f)`` (:func:`luckyao.lucky.kernels.stream_key`; a
-  splitmix64 / xoshiro256++ family of its own, not numpy's).
+  splitmix64 / xoshiro256++ family of its own, not numpy's). An EMCCD's gain register and
+  input-referred read noise of that frame: ``default_rng([seed + t, EMCCD_STREAM,
+  detector_key(name), f])`` (:func:`emccd_rng`).
 """
 
 import zlib
@@ -29,6 +31,16 @@ def screen_rng(seed: int, layer: int) -> np.random.Generator:
 def wfs_noise_rng(seed: int) -> np.random.Generator:
     """The generator of the LGS wavefront sensors' photon and read noise."""
     return np.random.default_rng([seed, WFS_NOISE_STREAM])
+
+
+EMCCD_STREAM = 0xFFFF_FFFE
+"""Second entropy word of the EMCCD gain-register streams (differs from every other stream's)."""
+
+
+def emccd_rng(seed: int, key: int, frame: int) -> np.random.Generator:
+    """The generator of an EMCCD's gain register and read noise for frame ``frame`` of the
+    detector keyed ``key`` (:func:`detector_key`), target seed ``seed``."""
+    return np.random.default_rng([seed, EMCCD_STREAM, key, frame])
 
 
 def target_seed(seed: int, target: int) -> int:

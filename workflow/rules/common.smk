@@ -12,8 +12,8 @@ from luckyao.study.resources import (commands_memory_bytes, lucky_memory_bytes, 
                                      turbulence_memory_bytes)
 from luckyao.study.config import (ConfigError, calibration_key, calibration_spec, canonical_json, commands_key,
                                   commands_spec, imaged_targets, lgs_twin, lucky_settings, plausibility_warnings,
-                                  reconstructor_key, reconstructor_spec, sha256, sweep_detectors, turbulence_key,
-                                  turbulence_spec, unused_cases, validate_study)
+                                  reconstructor_key, reconstructor_spec, sha256, SIGNAL_KINDS, sweep_detectors,
+                                  turbulence_key, turbulence_spec, unused_cases, validate_study)
 from luckyao.study.sweeps import expand_sweeps, sweep_points
 
 RUN_LOCK = hold_shared()  # this study folder is in use until this Snakemake exits (run.sh cleans up only when free)
@@ -86,7 +86,7 @@ def figure_settings(fig):
     besides: the detector sweep's detectors, a sweep's grid points."""
     figure = STUDY["figures"][fig]
     extra = {}
-    if figure["kind"] == "quality_vs_signal":
+    if figure["kind"] in SIGNAL_KINDS:
         extra["sweep_detectors"] = sweep_detectors(STUDY["lucky"])
     if "sweep" in figure:
         extra["sweep_points"] = [[p.case, p.values] for p in sweep_points(STUDY, figure["sweep"])]
@@ -150,7 +150,7 @@ def simulate_priority(case):
 def lucky_mem_mb(case):
     """Memory a case's lucky job may hold [MB] at paper fidelity (10 time blocks): its
     estimate as is (``resources.lucky_memory_bytes``: the sweep's 19 detectors, 4.7 GB
-    measured), at least 3 GB (a field's replay; its memory-mapped screens not counted)."""
+    measured with ``cog`` alone; the partial sums once per registration method), at least 3 GB (a field's replay; its memory-mapped screens not counted)."""
     return mem_mb(lucky_memory_bytes(lucky_settings(STUDY, CASES, case)), 3000, margin=1.0)
 
 

@@ -9,7 +9,7 @@ EXPORTS = {
     "metrics": ("strehl", "fwhm_arcsec", "centroid_px", "score_images", "EncircledEnergy"),
     "ranking": ("ExternalCriterion", "fraction_counts", "rank_frames", "selection_bins"),
     "accumulation": ("recentring_shifts_px", "PartialSums", "TimeBlocks"),
-    "pipeline": ("run_lucky", "ImageReference"),
+    "pipeline": ("run_lucky", "run_lucky_methods", "ImageReference"),
 }
 """Public objects, by module (imported on first use: :mod:`luckyao.exports`)."""
 

@@ -1,6 +1,7 @@
 """Recentred accumulation: whole-pixel shifts, time blocks and the layout of the partial sums.
 
-Each selected frame is recentred on its centre of gravity by a whole number of pixels
+Each selected frame is recentred on its registered position (:mod:`.registration`; the
+sub-pixel remainder, if any, applied before) by a whole number of pixels
 (``np.roll`` semantics: the simulated field is periodic over the frame) and added, in
 float64, to the partial sum of its (criterion, bin) (:mod:`.ranking`); a fraction's image
 is the cumulative sum of its bins. :class:`PartialSums` holds every such sum of a run, of

@@ -42,7 +42,13 @@ def result_dataset(detectors, criteria, criteria_external, fractions, counts, n_
         "photons_per_frame": ("detector", np.array(photons, np.float64),
                               _attrs("photon", "detected photons per frame (NaN: noiseless)")),
         "read_noise_e": ("detector", np.array([d.read_noise_e for d in detectors], np.float64),
-                         _attrs("electron", "read noise rms per pixel")),
+                         _attrs("electron", "read noise rms per pixel (EMCCD: referred to the input)")),
+        "electron_multiplying": ("detector", np.array([d.electron_multiplying for d in detectors], np.int8),
+                                 _attrs("1", "EMCCD gain register (Gamma-distributed gain, excess-noise factor "
+                                             "sqrt 2)")),
+        "photon_counting_threshold_e": ("detector", np.array(
+            [np.nan if d.photon_counting_threshold_e is None else d.photon_counting_threshold_e
+             for d in detectors], np.float64), _attrs("electron", "photon-counting threshold (NaN: none)")),
         "recentring": ("recentring", ["none", "cog"],
                        _attrs("1", "recentring of the long exposure: none or centre of gravity")),
         "frame": ("frame", np.arange(n_frames), _attrs("1", "frame index")),
@@ -101,6 +107,15 @@ def add_recentred_strehl(ds: xr.Dataset, frame_recentred_strehl: np.ndarray) -> 
     ds["frame_recentred_strehl"] = (("detector", "frame"), frame_recentred_strehl, _attrs(
         "1", "recentred frame's value at the recentred long exposure's peak pixel (within 3 pixels of the axis) "
              "over its flux and the diffraction-limited peak (their mean is that long exposure's Strehl)"))
+
+
+def add_registration(ds: xr.Dataset, name: str, registered_px: np.ndarray, unregistered: np.ndarray) -> None:
+    """The registration's per-frame positions (detector, frame, axis) and count of frames not registered."""
+    ds["frame_registered_px"] = (("detector", "frame", "axis"), registered_px, _attrs(
+        "pixel", f"position of the frame's image by registration {name} (pixel index; NaN: not registered, "
+                 "not shifted)"))
+    ds["unregistered_frames"] = (("detector",), np.asarray(unregistered, np.int64), _attrs(
+        "1", f"frames registration {name} could not register (no flux or no peak): not shifted, NaN position"))
 
 
 def add_images(ds: xr.Dataset, images: np.ndarray, long_images: np.ndarray, image_crop_px: int | None) -> xr.Dataset:

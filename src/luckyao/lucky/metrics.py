@@ -200,14 +200,15 @@ class EncircledEnergy:
         return frame, spectrum, pyfftw.FFTW(frame, spectrum, axes=(0, 1), flags=("FFTW_ESTIMATE",), threads=1)
 
     def fractions_binned(self, images: np.ndarray, centres_px: np.ndarray,
-                         flux: np.ndarray | None = None) -> np.ndarray:
+                         flux: np.ndarray | None = None, spectra=None) -> np.ndarray:
         """:meth:`fractions` of images (k, n, n) about ``centres_px`` (k, 2), shape
         (k, n_radii), summed otherwise: the terms of equal ``|f|`` first (float64, one
         kernel value each), then (k, bins) @ (bins, n_radii) in float64. The same sum in
         another order (agrees to float32 rounding); ~4x fewer operations. The spectra are
         FFTW's (float32, one frame at a time: :attr:`_rfft2`), not scipy's as in
         :meth:`fractions`: the same transform to float32 rounding. ``flux`` (k,): the images'
-        sums if known (float64; default: summed here)."""
+        sums if known (float64; default: summed here). ``spectra``: the images' spectra if known
+        (:class:`.registration.FrameSpectra`, the same FFTW transform), else made here."""
         images = np.asarray(images)
         n = self.n_pixels
         if images.ndim != 3 or images.shape[1:] != (n, n):
@@ -217,9 +218,11 @@ class EncircledEnergy:
         frame, spectrum, fft = self._rfft2
         binned = np.empty((len(images), kernel.shape[0]))
         for j, image in enumerate(images):
-            np.copyto(frame, image, casting="same_kind")
-            fft.execute()
-            radial_energy(spectrum, centres[j], fy, fx, row_end, bin_of, weight, binned[j])
+            if spectra is None:
+                np.copyto(frame, image, casting="same_kind")
+                fft.execute()
+            radial_energy(spectrum if spectra is None else spectra.spectrum(j), centres[j], fy, fx, row_end, bin_of,
+                          weight, binned[j])
         if flux is None:
             flux = images.sum(axis=(-2, -1), dtype=np.float64)
         flux = np.asarray(flux, dtype=np.float64)
@@ -227,9 +230,9 @@ class EncircledEnergy:
             return np.where(flux[:, None] > 0, (binned @ kernel) / flux[:, None], np.nan)
 
     def radius_px_binned(self, images: np.ndarray, centres_px: np.ndarray, level: float = 0.5,
-                         flux: np.ndarray | None = None) -> np.ndarray:
+                         flux: np.ndarray | None = None, spectra=None) -> np.ndarray:
         """:meth:`radius_px` of images (k, n, n) from :meth:`fractions_binned`, shape (k,)."""
-        return _first_crossing(self.radii_px, self.fractions_binned(images, centres_px, flux), level)
+        return _first_crossing(self.radii_px, self.fractions_binned(images, centres_px, flux, spectra), level)
 
     def radius_px(self, images: np.ndarray, level: float = 0.5,
                   centres_px: np.ndarray | None = None) -> np.ndarray:

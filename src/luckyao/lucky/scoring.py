@@ -1,17 +1,17 @@
 """Scores of lucky imaging: per-frame measures, and the integrated images of the partial sums.
 
 Every score is :mod:`.metrics`'s (one home per formula); here they are applied to the
-detected frames of a chunk (:func:`measure_frames`, from the sums the detection gives),
-to the partial sums of :class:`.accumulation.PartialSums` (:func:`integrated_images`,
-:func:`score_partial_sums`) and to the frames' values near the axis
-(:func:`value_at_peak`).
+detected frames of a chunk (:func:`frame_sums`, :class:`MatchedStrehl`), to the partial
+sums of :class:`.accumulation.PartialSums` (:func:`integrated_images`,
+:func:`score_partial_sums`) and to the frames' values near the axis (:func:`value_at_peak`).
 """
+
+from dataclasses import dataclass
 
 import numpy as np
 
 from . import kernels
-from .metrics import (EncircledEnergy, centroid_from_sums, d50_from_radius, relative_to_diffraction_limit,
-                      score_images, strehl_from)
+from .metrics import EncircledEnergy, relative_to_diffraction_limit, score_images, strehl_from
 
 
 def frame_sums(frames: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -23,17 +23,33 @@ def frame_sums(frames: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return rows, cols, peak
 
 
-def measure_frames(frames: np.ndarray, rows: np.ndarray, cols: np.ndarray, peak: np.ndarray,
-                   encircled: EncircledEnergy, diffraction_limited_peak: float) -> tuple[np.ndarray, ...]:
-    """Flux (k,), centre of gravity (k, 2) (y, x) [pixel], Strehl (k,) and d50 [pixel] (k,) of
-    frames (k, n, n) from their row and column sums (k, n) and peaks (k,) (:func:`frame_sums`);
-    NaN where the flux is not positive. The d50 is centred on the centre of gravity
-    (:meth:`EncircledEnergy.radius_px_binned`, the encircled energy summed by radial bins)."""
-    flux = rows.sum(axis=1)
-    centroids = centroid_from_sums(rows, cols, flux)
-    strehl_ratio = strehl_from(peak, flux, diffraction_limited_peak)
-    radius = encircled.radius_px_binned(frames, centroids, flux=flux)
-    return flux, centroids, strehl_ratio, d50_from_radius(radius, 1.0)
+@dataclass(frozen=True, eq=False)
+class MatchedStrehl:
+    """A frame's Strehl from its matched-filtered peak (``lucky.frame_strehl: matched_filter``):
+    ``S = max(K * frame) / (F max(K * I_dl))``, ``K`` the Gaussian of the diffraction-limited
+    core's FWHM (:class:`.registration.Registration` ``peak``'s filter), ``I_dl`` the unit-flux
+    diffraction-limited image, ``F`` the frame's flux. The filter averages the read and photon
+    noise over the core, so the bias of the single brightest pixel of a noisy frame (the
+    maximum of many noisy pixels) shrinks; 1 for the diffraction-limited image."""
+
+    registration: object
+    """The ``peak`` :class:`.registration.Registration` whose filter is used."""
+    filtered_peak: float
+    """``max(K * I_dl)`` of the unit-flux diffraction-limited image."""
+
+    @classmethod
+    def of(cls, diffraction_limited: np.ndarray, core_fwhm_px: float) -> "MatchedStrehl":
+        from .registration import Registration
+
+        registration = Registration("peak", diffraction_limited, core_fwhm_px)
+        unit = (diffraction_limited / diffraction_limited.sum()).astype(np.float32)[None]
+        return cls(registration, float(registration.filtered(unit).max()))
+
+    def __call__(self, frames: np.ndarray, flux: np.ndarray, spectra=None) -> np.ndarray:
+        """Strehl ratios (k,) of frames (k, n, n) of flux (k,), their ``spectra`` if known
+        (:class:`.registration.FrameSpectra`); NaN where the flux is not positive."""
+        peaks = self.registration.filtered(frames, spectra).max(axis=(1, 2)).astype(np.float64)
+        return strehl_from(peaks, flux, self.filtered_peak)
 
 
 def integrated_images(partial: np.ndarray, n_crit: int, n_bins: int, last_bin: np.ndarray) -> np.ndarray:

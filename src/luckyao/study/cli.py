@@ -12,6 +12,7 @@
     luckyao figure --id ID (--settings JSON | --settings-file S.json) --out-prefix figures/ID  lucky.nc ...
     luckyao export lucky.nc --out images.fits [--detector NAME ...]
     luckyao table figures/longexp.nc
+    luckyao knees figures/registration.nc [--fraction F] [--criterion C] [--read-noise R]
     luckyao archive [--study-dir DIR] [--configfile OVERLAY ...] [--out A.tar]
     luckyao verify A.tar [--case NAME | --all-cases] [--workdir DIR] [--rtol R] [--atol A] [--no-rerun]
     luckyao lock [--out requirements.lock]
@@ -164,6 +165,26 @@ def cmd_table(args) -> None:
     sys.stdout.write(long_exposure_markdown(data))
 
 
+def cmd_knees(args) -> None:
+    from .datasets import open_dataset
+    from .figures.registration import knee_markdown
+
+    data = open_dataset(args.data, "registration figure data", remake=False)
+    if "strehl_knee_photons" not in data:
+        raise ValueError(f"'{args.data}' is not a registration figure's data (it has no strehl_knee_photons); "
+                         "give one such as figures/registration.nc")
+    fraction = float(data.fraction.values[0]) if args.fraction is None else args.fraction
+    for key, value, coord in (("--fraction", fraction, "fraction"), ("--criterion", args.criterion, "criterion"),
+                              ("--read-noise", args.read_noise, "read_noise")):
+        if value not in data[coord].values:
+            raise ValueError(f"{key} {value}: '{args.data}' has {list(data[coord].values)}")
+    sys.stdout.write(f"Knees at {100 * fraction:g} % of frames, selection by {args.criterion}, read noise "
+                     f"{args.read_noise:g} e-: the signal from which the integrated Strehl keeps 90 % of its "
+                     "noiseless value and d50 stays within 10 % of it (I magnitude: "
+                     f"{float(data.attrs['i_zero_photons_per_frame']):.3g} photons per frame at I = 0)\n\n")
+    sys.stdout.write(knee_markdown(data, fraction, args.criterion, args.read_noise) + "\n")
+
+
 def cmd_archive(args) -> int:
     """One tar file of a finished study; problems one line each (no traceback)."""
     from .archive import archive
@@ -291,6 +312,13 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("table", help="a long_exposure_table figure's data as a Markdown table")
     p.add_argument("data", help="the figure's .nc, e.g. figures/longexp.nc")
     p.set_defaults(func=cmd_table)
+
+    p = sub.add_parser("knees", help="a registration figure's knees as a Markdown table")
+    p.add_argument("data", help="the figure's .nc, e.g. figures/registration.nc")
+    p.add_argument("--fraction", type=float, help="fraction of frames (default: the figure's first)")
+    p.add_argument("--criterion", default="lgs_rms", help="selection criterion (default lgs_rms)")
+    p.add_argument("--read-noise", type=float, default=0.1, help="read noise [e-] (default 0.1)")
+    p.set_defaults(func=cmd_knees)
 
     p = sub.add_parser("archive", help="one tar file of a finished study, with checksums")
     p.add_argument("--study-dir", default=".", help="the study folder Snakemake ran in (default: here)")

@@ -227,13 +227,14 @@ def _check_figure(fig_id: str, figure: dict, cases: dict, config: dict) -> None:
     detector = figure.get("detector")
     if detector is not None and detector not in config["lucky"]["detectors"]:
         raise ConfigError(f"config key 'figures.{fig_id}.detector': unknown detector '{detector}'")
-    if figure["kind"] == "quality_vs_signal":
+    if figure["kind"] in SIGNAL_KINDS:
+        kind = figure["kind"]
         sweep = config["lucky"].get("detector_sweep")
         if sweep is None:
-            raise ConfigError(f"config key 'figures.{fig_id}.kind': quality_vs_signal needs lucky.detector_sweep")
-        for key in ("criteria", "fractions", "read_noise_e", "metric"):
+            raise ConfigError(f"config key 'figures.{fig_id}.kind': {kind} needs lucky.detector_sweep")
+        for key in ("criteria", "fractions", "read_noise_e") + (("metric",) if kind == "quality_vs_signal" else ()):
             if key not in figure:
-                raise ConfigError(f"config key 'figures.{fig_id}.{key}': required for quality_vs_signal")
+                raise ConfigError(f"config key 'figures.{fig_id}.{key}': required for {kind}")
         missing = set(figure["read_noise_e"]) - set(sweep["read_noise_e"])
         if missing:
             raise ConfigError(f"config key 'figures.{fig_id}.read_noise_e': {sorted(missing)} not in "
@@ -426,6 +427,10 @@ def figure_default(key: str):
     return load_schema()["properties"]["figures"]["additionalProperties"]["properties"][key]["default"]
 
 
+SIGNAL_KINDS = ("quality_vs_signal", "registration")
+"""The figure kinds drawn against the detector sweep: their cases get it and every registration method."""
+
+
 def case_defaults(block: str) -> dict:
     """The schema's defaults of a case block's optional keys (``wfs``: ``centroider``,
     ``threshold``, ``calibration``, ...; ``telescope``: the size-scaling parameters): their one home."""
@@ -449,6 +454,16 @@ def error_blocks(lucky: dict) -> int:
     return _lucky_value(lucky, "error_blocks")
 
 
+def frame_strehl(lucky: dict) -> str:
+    """How a frame's Strehl is measured: ``lucky.frame_strehl``, by default the schema's (``peak_pixel``)."""
+    return _lucky_value(lucky, "frame_strehl")
+
+
+def registrations(lucky: dict) -> list[str]:
+    """The registration methods: ``lucky.registration``, by default the schema's (``cog`` only)."""
+    return list(_lucky_value(lucky, "registration"))
+
+
 def sweep_detectors(lucky: dict) -> dict:
     """The named detectors of ``lucky.detector_sweep`` (none without it): every read noise
     x ``levels`` photon counts per frame, log-spaced from ``min`` to ``max``."""
@@ -467,10 +482,13 @@ def sweep_name(read_noise_e: float, photons_per_frame: float) -> str:
 
 def lucky_settings(study: dict, cases: dict, case_name: str) -> dict:
     """The post-processing settings one case's lucky job uses, with its resolved config:
-    every listed detector, and the detector sweep when a ``quality_vs_signal`` figure
-    shows the case (the sweep's cost goes only where it is drawn)."""
-    lucky = {key: value for key, value in study["lucky"].items() if key != "detector_sweep"}
+    every listed detector, and the detector sweep and every registration method when a
+    ``quality_vs_signal`` or ``registration`` figure shows the case (their cost goes only where
+    they are drawn; elsewhere ``cog`` alone)."""
+    lucky = {key: value for key, value in study["lucky"].items() if key not in ("detector_sweep", "registration")}
     lucky["error_blocks"] = error_blocks(study["lucky"])
-    if any(f["kind"] == "quality_vs_signal" and case_name in f["cases"] for f in study["figures"].values()):
+    lucky["registration"] = ["cog"]
+    if any(f["kind"] in SIGNAL_KINDS and case_name in f["cases"] for f in study["figures"].values()):
         lucky["detectors"] = {**lucky["detectors"], **sweep_detectors(study["lucky"])}
+        lucky["registration"] = registrations(study["lucky"])
     return {"seed": study["seed"], "case": case_name, "case_config": cases[case_name], **lucky}

@@ -1,6 +1,6 @@
 """FITS export of a case's images: every integrated (lucky) and long-exposure image of
-``lucky.nc``, per target, criterion, fraction, recentring and detector, one image
-extension each, with the header an astronomer's tools read: a linear WCS in arcsec
+``lucky.nc`` (of the baseline registration, ``cog``), per target, criterion, fraction, recentring
+and detector, one image extension each, with the header an astronomer's tools read: a linear WCS in arcsec
 from the optical axis, the wavelength, the image's Strehl, FWHM and d50 with their
 Monte-Carlo errors, and the provenance (case, seed, config sha256, code version).
 
@@ -134,6 +134,8 @@ def export_fits(lucky_path, out_path, detectors=None) -> int:
     from astropy.io import fits
 
     lucky = open_dataset(lucky_path, "lucky")
+    if "registration" in lucky.dims:  # the baseline's images (cog)
+        lucky = lucky.sel(registration="cog")
     primary = fits.PrimaryHDU()
     for key, value, comment in _provenance_cards(lucky):
         _set_card(primary.header, key, value, comment)

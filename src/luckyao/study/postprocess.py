@@ -1,7 +1,8 @@
 """Lucky post-processing of one case: frames + telemetry -> ``lucky.nc``.
 
-Runs ``lucky.run_lucky`` for every target and detector (with a ``reference_target``,
-the star's frames select and recentre every target), and adds what the
+Runs ``lucky.run_lucky_methods`` for every target, detector and registration method (the
+methods in the same passes over a target's frames; with a ``reference_target``, the star's
+frames select and recentre every target, by each method), and adds what the
 figures need from the telemetry: the long-exposure Strehl's Monte-Carlo error
 (batch means of the per-frame value on the axis) and the mean r0.
 """
@@ -13,7 +14,7 @@ import numpy as np
 import xarray as xr
 
 from ..lucky.accumulation import batch_mean_error
-from ..lucky.pipeline import ImageReference, run_lucky
+from ..lucky.pipeline import ImageReference, run_lucky_methods
 from ..lucky.ranking import ExternalCriterion
 from ..seeds import target_seed
 from .datasets import iter_frame_blocks, open_dataset, provenance, require_finite, write_dataset
@@ -33,7 +34,7 @@ also the oracle ``true_rms``, the true corrected tilt-removed rms (a bound, not 
 
 def _frames_of(settings: LuckySettings, telemetry: xr.Dataset, target: int, frames_path, screens_path,
                screens_metadata_path):
-    """A target's frames for :func:`.pipeline.run_lucky`: stored, or replayed from the screens and
+    """A target's frames for :func:`.pipeline.run_lucky_methods`: stored, or replayed from the screens and
     the recorded DM commands (:class:`.simulation.Replay`, whose values on the axis the caller
     reads once they are made); the replay, or None."""
     if target in settings.imaged_targets:
@@ -73,19 +74,26 @@ def lucky_case(settings_config: dict, frames_path, telemetry_path, out_path, scr
     axis_strehl = telemetry.axis_strehl.values.copy()  # (target, frame); the replayed targets' filled below
     order = list(range(n_targets)) if reference is None else [reference] + [
         t for t in range(n_targets) if t != reference]  # the star first: the others take its measurements
-    per_target = {}
+    registrations, matched_strehl = settings.registration_methods(), settings.matched_strehl()
+    per_target = {}  # target -> its datasets, one per registration method (all made in the same passes)
     for target in order:
-        log.info("target %d/%d", target + 1, n_targets)
-        image_reference = None if reference in (None, target) else ImageReference.of(per_target[reference])
+        log.info("target %d/%d, registration %s", target + 1, n_targets, ", ".join(settings.registrations))
+        references = None if reference in (None, target) else [ImageReference.of(ds) for ds in per_target[reference]]
         frames, replay = _frames_of(settings, telemetry, target, frames_path, screens_path, screens_metadata_path)
-        per_target[target] = run_lucky(
-            frames, n_frames, settings.detectors, settings.fractions, peak, settings.case.camera.pixel_scale_arcsec,
-            target_seed(settings.seed, target), criteria_external=_external_criteria(telemetry, target),
-            reference=image_reference, n_blocks=n_blocks, image_crop_px=settings.image_crop_px)
+        per_target[target] = run_lucky_methods(
+            frames, n_frames, settings.detectors, settings.fractions, peak,
+            settings.case.camera.pixel_scale_arcsec, target_seed(settings.seed, target),
+            criteria_external=_external_criteria(telemetry, target), references=references,
+            n_blocks=n_blocks, image_crop_px=settings.image_crop_px, registrations=registrations,
+            matched_strehl=matched_strehl)
         if replay is not None:
             axis_strehl[target] = replay.axis_strehl[0]
-    ds = xr.concat([per_target[t] for t in range(n_targets)], dim="target", data_vars="all", coords="minimal",
-                   compat="override")
+    per_registration = [xr.concat([per_target[t][m] for t in range(n_targets)], dim="target", data_vars="all",
+                                  coords="minimal", compat="override") for m in range(len(registrations))]
+    ds = xr.concat(per_registration, dim="registration", data_vars="all", coords="minimal", compat="override")
+    ds = ds.assign_coords(registration=("registration", list(settings.registrations), {
+        "units": "1", "long_name": "registration method of the frames (recentring 'cog' of the long exposure: "
+                                   "registered by this method)"}))
     ds.attrs.pop("frames_drawn_again", None)  # per target: in its log line
     ds["reference_target"] = ((), -1 if reference is None else reference, {
         "units": "1", "long_name": "target whose frames give every target its image criteria and recentring "
@@ -94,9 +102,10 @@ def lucky_case(settings_config: dict, frames_path, telemetry_path, out_path, scr
     ds["long_exposure_strehl_error"] = ("target", errors, {
         "units": "1", "long_name": f"Monte-Carlo standard error of the long-exposure Strehl (no recentring), "
                                    f"from {n_blocks} batch means"})
-    recentred = [[batch_mean_error(v, n_blocks) for v in ds.frame_recentred_strehl.values[t]]
-                 for t in range(ds.sizes["target"])]
-    ds["recentred_long_exposure_strehl_error"] = (("target", "detector"), recentred, {
+    recentred = [[[batch_mean_error(v, n_blocks) for v in per_target] for per_target in per_registration]
+                 for per_registration in ds.frame_recentred_strehl.transpose("registration", "target", "detector",
+                                                                             "frame").values]
+    ds["recentred_long_exposure_strehl_error"] = (("registration", "target", "detector"), recentred, {
         "units": "1", "long_name": f"Monte-Carlo standard error of the recentred long-exposure Strehl, "
                                    f"from {n_blocks} batch means"})
     for name in ("true_rms_nm", "lgs_rms_nm", "lgs_residual_rms_nm", "transmitted_flux"):

@@ -20,6 +20,10 @@ KINDS = {
                          "photon noise and Gaussian read noise), a row per read noise and a column per fraction "
                          "selected; the noiseless detector's value for reference; noise-dominated points (more than "
                          "30 % off the same selection on the noiseless frames) are left out.",
+    "registration": "Integrated-image Strehl ratio and 50%-energy diameter vs detected photons per lucky frame "
+                    "(the detector sweep) for every registration method (colour), selection criterion (line "
+                    "style), read noise (rows) and case (columns), the top axis in I magnitude (4.2 m, 100 Hz); "
+                    "its dataset holds each curve's knee (luckyao knees).",
     "quality_vs_distance": "Integrated-image quality vs the target's off-axis distance in the field, a row per "
                            "selection criterion, a colour per case and a line style per fraction selected.",
     "psf_gallery": "The images themselves: each case's long exposure beside its lucky images (shift-and-add of the "
@@ -57,7 +61,7 @@ def figure_caption(fig_id: str, figure: dict, study: dict, cases: dict) -> str:
         settings.append("selection by " + ", ".join(rst_text(c) for c in figure["criteria"]))
     if figure.get("fractions"):
         settings.append("fractions " + ", ".join(f"{100 * f:g} %" for f in figure["fractions"]))
-    if figure["kind"] not in ("asterism", "rms_truth", "residuals", "quality_vs_signal"):
+    if figure["kind"] not in ("asterism", "rms_truth", "residuals", "quality_vs_signal", "registration"):
         settings.append(f"detector {rst_text(figure.get('detector', 'noiseless'))}")
     if figure.get("read_noise_e"):
         settings.append("read noise " + ", ".join(f"{r:g}" for r in figure["read_noise_e"]) + " e-")

@@ -28,6 +28,7 @@ from .quality import (comparisons_data, draw_comparisons, draw_quality_vs_distan
                       draw_quality_vs_parameter, quality_vs_distance_data, quality_vs_fraction_data,
                       quality_vs_parameter_data)
 from .settings import CaseSummary, FigureSettings
+from .registration import draw_registration, registration_data
 from .signal import draw_quality_vs_signal, quality_vs_signal_data
 from .tables import (draw_long_exposure_check, draw_long_exposure_table, long_exposure_check_data,
                      long_exposure_markdown, long_exposure_table_data, value_with_error)
@@ -44,11 +45,21 @@ FIGURE_KINDS = {
     "long_exposure_check": (long_exposure_check_data, draw_long_exposure_check),
     "long_exposure_table": (long_exposure_table_data, draw_long_exposure_table),
     "quality_vs_signal": (quality_vs_signal_data, draw_quality_vs_signal),
+    "registration": (registration_data, draw_registration),
     "quality_vs_distance": (quality_vs_distance_data, draw_quality_vs_distance),
     "comparisons": (comparisons_data, draw_comparisons),
     "residuals": (residuals_data, draw_residuals),
     "psf_gallery": (psf_gallery_data, draw_psf_gallery),
 }
+
+REGISTRATION_KINDS = ("registration", "quality_vs_signal")
+"""The kinds drawn for every registration method; the others draw the baseline, ``cog``."""
+
+
+def baseline_registration(ds):
+    """A case's lucky dataset for the baseline registration, ``cog`` (every method's dataset has it)."""
+    return ds.sel(registration="cog") if "registration" in ds.dims else ds
+
 
 __all__ = ["FIGURE_KINDS", "CaseSummary", "FigureSettings", "draw_figure", "long_exposure_markdown",
            "value_with_error"]
@@ -59,6 +70,8 @@ def draw_figure(fig_id: str, settings: dict, lucky_paths, out_prefix: str) -> No
     none for geometry-only kinds); ``settings['case_configs']`` holds the cases' resolved configs."""
     typed = FigureSettings.from_dict(settings)
     datasets = [open_dataset(path, "lucky") for path in lucky_paths]
+    if typed.kind not in REGISTRATION_KINDS:
+        datasets = [baseline_registration(ds) for ds in datasets]
     make_data, draw = FIGURE_KINDS[typed.kind]
     ds = make_data(typed, datasets)
     ds.attrs.update(provenance(f"luckyao figure {fig_id}", settings, typed.seed))

@@ -9,10 +9,22 @@ from .style import AO_STYLE, CRITERIA, MARKERS, METRICS, colour, new_figure, wit
 
 
 def quality_vs_signal_data(settings: FigureSettings, datasets) -> xr.Dataset:
+    """:func:`signal_data` for every registration method the cases share, along ``registration``
+    (the lucky datasets' own dimension; ``cog`` alone when they have none)."""
+    if not all("registration" in ds.dims for ds in datasets):
+        return signal_data(settings, datasets).expand_dims(registration=["cog"])
+    methods = [m for m in datasets[0].registration.values if all(m in ds.registration.values for ds in datasets)]
+    per_method = [signal_data(settings, [ds.sel(registration=m) for ds in datasets]) for m in methods]
+    ds = xr.concat(per_method, dim="registration", data_vars="all", coords="minimal", compat="override")
+    return ds.assign_coords(registration=("registration", [str(m) for m in methods],
+                                          {"long_name": "registration method"}))
+
+
+def signal_data(settings: FigureSettings, datasets) -> xr.Dataset:
     """Integrated-image quality (first target) vs detected photons per frame over the
-    detector sweep, per case, criterion, fraction and read noise; with the score of the
-    same selection and shifts on the noiseless frames, the noiseless detector's, and
-    where the value is noise-dominated (:data:`.quality.NOISE_DOMINATED`)."""
+    detector sweep, per case, criterion, fraction and read noise, of one registration; with
+    the score of the same selection and shifts on the noiseless frames, the noiseless
+    detector's, and where the value is noise-dominated (:data:`.quality.NOISE_DOMINATED`)."""
     metric, criteria, fractions = settings.metric, list(settings.criteria), list(settings.fractions)
     read_noise = list(settings.read_noise_e)
     first = datasets[0]
@@ -52,18 +64,21 @@ def quality_vs_signal_data(settings: FigureSettings, datasets) -> xr.Dataset:
 
 
 def draw_quality_vs_signal(ds: xr.Dataset, title: str):
+    """A row per (registration method, read noise), a column per fraction."""
     metric = ds.attrs["metric"]
-    n_rows, n_cols = ds.sizes["read_noise"], ds.sizes["fraction"]
+    rows = [(method, read_noise) for method in ds.registration.values for read_noise in ds.read_noise.values]
+    n_rows, n_cols = len(rows), ds.sizes["fraction"]
     fig = new_figure(4.3 * n_cols, 3.6 * n_rows + 1.1)
     axes = fig.subplots(n_rows, n_cols, squeeze=False, sharey=True)
     flag = f"{metric}_noise_dominated"
-    for r, read_noise in enumerate(ds.read_noise.values):
+    for r, (method, read_noise) in enumerate(rows):
         for f, fraction in enumerate(ds.fraction.values):
             ax = axes[r, f]
             for case in ds.case.values:
                 ls = AO_STYLE[str(ds.ao_mode.sel(case=case).values)]
                 for k, criterion in enumerate(ds.criterion.values):
-                    cell = ds.sel(case=case, criterion=criterion, fraction=fraction, read_noise=read_noise)
+                    cell = ds.sel(case=case, criterion=criterion, fraction=fraction, read_noise=read_noise,
+                                  registration=method)
                     y = cell[metric].values.astype(float)
                     if flag in cell:
                         y = np.where(cell[flag].values.astype(bool), np.nan, y)
@@ -78,8 +93,8 @@ def draw_quality_vs_signal(ds: xr.Dataset, title: str):
             ax.set_xscale("log")
             ax.set_xlabel("detected photons per frame")
             ax.set_ylabel(METRICS[metric])
-            ax.set_title(f"({chr(ord('a') + r * n_cols + f)}) read noise {read_noise:g} e-, {100 * fraction:g} % "
-                         "of frames", loc="left", fontsize=9)
+            ax.set_title(f"({chr(ord('a') + r * n_cols + f)}) {method}, read noise {read_noise:g} e-, "
+                         f"{100 * fraction:g} % of frames", loc="left", fontsize=9)
             ax.grid(alpha=0.3)
     # the axis spans the values the noise leaves alone: at a few photons the recentring fails
     # and the images blur far off the scale (arcsec)

@@ -1,0 +1,167 @@
+"""Integrated-image quality vs detected signal per frame for every registration method, with
+the signal as an I magnitude, and the knees: the signal below which a method loses its
+noiseless quality."""
+
+from dataclasses import replace
+
+import numpy as np
+import xarray as xr
+from matplotlib.ticker import FormatStrFormatter, NullFormatter
+
+from .settings import FigureSettings
+from .signal import signal_data
+from .style import CRITERIA, LINE_STYLES, METRICS, colour, new_figure
+
+REGISTRATION_METRICS = ("strehl", "d50_arcsec")
+"""The figure's metrics: the integrated image's Strehl and 50%-energy diameter."""
+
+KNEE_TOLERANCE = {"strehl": 0.9, "d50_arcsec": 1.1}
+"""A knee: the signal above which the value stays at >= 90 % of the noiseless Strehl, or within
+10 % of the noiseless d50 (the value with the noiseless detector, same method and selection).
+The values are those of the noisy frames' selection and shifts applied to the noiseless frames
+(``*_noiseless``): the noisy image's own Strehl is biased up at low signal, where a method that
+registers on the brightest noise speckle piles the noise peaks up on the axis."""
+
+I_ZERO_POINT_W_M2_UM = 1.13e-8
+"""I-band (0.80 um) flux density of magnitude 0 [W m^-2 um^-1] (Vega; Bessell, Castelli & Plez 1998,
+1.13e-9 erg s^-1 cm^-2 A^-1)."""
+I_WAVELENGTH_UM, I_BANDWIDTH_UM = 0.80, 0.30
+"""The band's centre and width [um]: a long-pass I (+ z) filter, as lucky cameras use."""
+THROUGHPUT = 0.5
+"""Atmosphere, telescope, instrument and detector quantum efficiency together."""
+FRAME_TIME_S = 0.01
+"""The lucky frame (100 Hz)."""
+TELESCOPE_AREA_M2 = np.pi / 4 * (4.2**2 - 1.2**2)
+"""The 4.2 m telescope's collecting area, less the 1.2 m central obscuration [m^2]."""
+
+
+def photons_at_zero_magnitude() -> float:
+    """Detected photons per frame of an I = 0 star: F_lambda dlambda A T t / (h c / lambda)."""
+    photon_energy_j = 6.62607015e-34 * 2.99792458e8 / (I_WAVELENGTH_UM * 1e-6)
+    power_w = I_ZERO_POINT_W_M2_UM * I_BANDWIDTH_UM * TELESCOPE_AREA_M2 * THROUGHPUT
+    return power_w * FRAME_TIME_S / photon_energy_j
+
+
+def i_magnitude(photons_per_frame):
+    """The I magnitude of a star giving ``photons_per_frame`` detected photons per frame
+    (:func:`photons_at_zero_magnitude`; 866 photons at I = 15, 55 at I = 18)."""
+    return 2.5 * np.log10(photons_at_zero_magnitude() / np.asarray(photons_per_frame, dtype=float))
+
+
+def photons_per_frame(i_mag):
+    """The inverse of :func:`i_magnitude`."""
+    return photons_at_zero_magnitude() * 10 ** (-0.4 * np.asarray(i_mag, dtype=float))
+
+
+def registration_data(settings: FigureSettings, datasets) -> xr.Dataset:
+    """:func:`.signal.signal_data` of Strehl and d50 for every registration method of
+    the cases (along ``registration``), with each curve's knee (:func:`knees`)."""
+    methods = [str(m) for m in datasets[0].registration.values]
+    per_method = []
+    for method in methods:
+        chosen = [ds.sel(registration=method) for ds in datasets]
+        per_metric = [signal_data(_with_metric(settings, metric), chosen) for metric in REGISTRATION_METRICS]
+        per_method.append(xr.merge(per_metric, compat="override", combine_attrs="drop"))
+    ds = xr.concat(per_method, dim="registration", data_vars="all", coords="minimal", compat="override")
+    ds = ds.assign_coords(registration=("registration", methods, {"long_name": "registration method"}))
+    for metric in REGISTRATION_METRICS:
+        ds[f"{metric}_knee_photons"] = knees(ds, metric)
+    ds.attrs.update(i_zero_photons_per_frame=photons_at_zero_magnitude(), i_zero_point_w_m2_um=I_ZERO_POINT_W_M2_UM,
+                    i_bandwidth_um=I_BANDWIDTH_UM, throughput=THROUGHPUT, frame_time_s=FRAME_TIME_S)
+    return ds
+
+
+def _with_metric(settings: FigureSettings, metric: str) -> FigureSettings:
+    return replace(settings, metric=metric)
+
+
+def knees(ds: xr.Dataset, metric: str) -> xr.DataArray:
+    """Per curve, the lowest signal [photons per frame] from which the value of the noisy
+    selection and shifts on the noiseless frames (``<metric>_noiseless``) stays within
+    :data:`KNEE_TOLERANCE` of the noiseless detector's (interpolated in log signal between the
+    last point outside and the first inside); NaN when even the highest signal is outside, the
+    lowest signal when every point is inside."""
+    value = ds[f"{metric}_noiseless"].transpose(..., "signal")
+    reference = ds[f"{metric}_noiseless_detector"]
+    ratio = (value / reference).transpose(..., "signal")
+    tolerance = KNEE_TOLERANCE[metric]
+    inside = ratio >= tolerance if metric == "strehl" else ratio <= tolerance
+    log_signal = np.log10(ds.signal.values)
+    flat_inside = inside.values.reshape(-1, ds.sizes["signal"])
+    flat_ratio = ratio.values.reshape(-1, ds.sizes["signal"])
+    out = np.full(len(flat_inside), np.nan)
+    for j, (ok, r) in enumerate(zip(flat_inside, flat_ratio)):
+        if not ok[-1]:
+            continue
+        outside = np.flatnonzero(~ok)
+        if not outside.size:
+            out[j] = ds.signal.values[0]
+            continue
+        a = outside[-1]  # last point outside; a + 1 inside
+        t = (tolerance - r[a]) / (r[a + 1] - r[a]) if np.isfinite(r[a]) and r[a + 1] != r[a] else 1.0
+        out[j] = 10 ** (log_signal[a] + np.clip(t, 0, 1) * (log_signal[a + 1] - log_signal[a]))
+    return xr.DataArray(out.reshape(inside.shape[:-1]), dims=inside.dims[:-1], attrs={
+        "units": "photon", "long_name": f"detected photons per frame from which {metric} stays within "
+                                        f"{abs(1 - tolerance):.0%} of the noiseless detector's (NaN: never)"})
+
+
+def knee_markdown(ds: xr.Dataset, fraction: float, criterion: str, read_noise: float) -> str:
+    """The knees of a registration figure's dataset as a Markdown table: a row per case and method."""
+    lines = ["| case | registration | Strehl knee [photons/frame] (I mag) | d50 knee [photons/frame] (I mag) |",
+             "|---|---|---|---|"]
+    for case in ds.case.values:
+        for method in ds.registration.values:
+            cells = []
+            for metric in REGISTRATION_METRICS:
+                knee = float(ds[f"{metric}_knee_photons"].sel(case=case, registration=method, fraction=fraction,
+                                                                criterion=criterion, read_noise=read_noise))
+                at_most = "≤ " if knee == ds.signal.values[0] else ""  # inside down to the lowest signal drawn
+                cells.append("not reached" if np.isnan(knee) else
+                             f"{at_most}{knee:.3g} (I {'≥ ' if at_most else ''}{i_magnitude(knee):.1f})")
+            lines.append(f"| {ds.label.sel(case=case).values} | {method} | {cells[0]} | {cells[1]} |")
+    return "\n".join(lines)
+
+
+def draw_registration(ds: xr.Dataset, title: str):
+    """Rows: metric x read noise; columns: cases; colour: registration method; line style:
+    selection criterion; the first fraction of the figure; I magnitude on the top axis."""
+    fraction = float(ds.fraction.values[0])
+    n_rows, n_cols = len(REGISTRATION_METRICS) * ds.sizes["read_noise"], ds.sizes["case"]
+    fig = new_figure(4.6 * max(n_cols, 2), 3.2 * n_rows + 1.4)
+    axes = fig.subplots(n_rows, n_cols, squeeze=False, sharex=True)
+    for m, metric in enumerate(REGISTRATION_METRICS):
+        for r, read_noise in enumerate(ds.read_noise.values):
+            row = m * ds.sizes["read_noise"] + r
+            for c, case in enumerate(ds.case.values):
+                ax = axes[row, c]
+                for k, method in enumerate(ds.registration.values):
+                    for s, criterion in enumerate(ds.criterion.values):
+                        cell = ds.sel(case=case, criterion=criterion, fraction=fraction, read_noise=read_noise,
+                                      registration=method)
+                        ax.plot(ds.signal, cell[f"{metric}_noiseless"].values, color=colour(k), ls=LINE_STYLES[s % 4],
+                                marker="o", ms=2.5, label=f"{method}, by {CRITERIA.get(criterion, criterion)}")
+                        ax.axhline(float(cell[f"{metric}_noiseless_detector"]), color=colour(k), lw=0.5,
+                                   ls=LINE_STYLES[s % 4], alpha=0.5)
+                ax.set_xscale("log")
+                ax.set_ylabel(METRICS[metric])
+                if metric == "d50_arcsec":
+                    ax.set_yscale("log")
+                ax.set_title(f"({chr(ord('a') + row * n_cols + c)}) {ds.label.sel(case=case).values}, read noise "
+                             f"{read_noise:g} e-", loc="left", fontsize=9)
+                ax.grid(alpha=0.3)
+                top = ax.secondary_xaxis("top", functions=(i_magnitude, photons_per_frame))
+                magnitudes = i_magnitude(ds.signal.values[[-1, 0]])
+                top.set_xticks(np.arange(np.ceil(magnitudes[0]), np.floor(magnitudes[1]) + 1))
+                top.xaxis.set_major_formatter(FormatStrFormatter("%g"))
+                top.xaxis.set_minor_formatter(NullFormatter())
+                top.set_xlabel("I magnitude" if row == 0 else "")
+    for ax in axes[-1]:
+        ax.set_xlabel("detected photons per frame")
+    fig.legend(*axes[0, 0].get_legend_handles_labels(), loc="outside lower center", ncol=2, fontsize=8,
+               title=f"{100 * fraction:g} % of frames, the noisy frames' selection and shifts scored on the noiseless "
+                     "frames; colour: registration;\nline style: selection criterion; "
+                     f"thin lines: noiseless detector.\nI magnitude: {ds.attrs['i_zero_photons_per_frame']:.3g} "
+                     f"photons per frame at I = 0\n({ds.attrs['i_bandwidth_um'] * 1e3:g} nm band, throughput "
+                     f"{ds.attrs['throughput']:g}, {ds.attrs['frame_time_s'] * 1e3:g} ms, 4.2 m)", title_fontsize=8)
+    fig.suptitle(f"{title}: integrated-image quality vs signal per frame,\nby registration method")
+    return fig
