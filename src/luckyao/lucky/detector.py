@@ -129,8 +129,7 @@ class PreparedChunk:
         if em:
             for j in np.flatnonzero(drawn):
                 out[j] = gain_register(out[j], detector, emccd_rng(seed, detector_key(detector.name), first_frame + j))
-                rows[j], cols[j] = out[j].sum(axis=1, dtype=np.float64), out[j].sum(axis=0, dtype=np.float64)
-                peak[j] = out[j].max()
+                kernels.frame_sums(out[j:j + 1], rows[j:j + 1], cols[j:j + 1], peak[j:j + 1])
         return out, rows, cols, peak
 
 
