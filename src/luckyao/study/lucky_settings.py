@@ -6,11 +6,10 @@ The dict comes from ``config.lucky_settings`` (validated; defaults in ``config.s
 
 from dataclasses import dataclass
 
+from ..lucky.detector import Detector
 from ..lucky.registration import Registration
 from ..lucky.scoring import MatchedStrehl
 from ..optics.imaging import Imager
-
-from ..lucky.detector import Detector
 from .case import Case
 from .config import canonical_json, error_blocks, frame_strehl, image_crop_px, imaged_targets, registrations
 

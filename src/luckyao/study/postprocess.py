@@ -102,9 +102,8 @@ def lucky_case(settings_config: dict, frames_path, telemetry_path, out_path, scr
     ds["long_exposure_strehl_error"] = ("target", errors, {
         "units": "1", "long_name": f"Monte-Carlo standard error of the long-exposure Strehl (no recentring), "
                                    f"from {n_blocks} batch means"})
-    recentred = [[[batch_mean_error(v, n_blocks) for v in per_target] for per_target in per_registration]
-                 for per_registration in ds.frame_recentred_strehl.transpose("registration", "target", "detector",
-                                                                             "frame").values]
+    values = ds.frame_recentred_strehl.transpose("registration", "target", "detector", "frame").values
+    recentred = np.apply_along_axis(batch_mean_error, -1, values, n_blocks)  # (registration, target, detector)
     ds["recentred_long_exposure_strehl_error"] = (("registration", "target", "detector"), recentred, {
         "units": "1", "long_name": f"Monte-Carlo standard error of the recentred long-exposure Strehl, "
                                    f"from {n_blocks} batch means"})
