@@ -8,7 +8,7 @@ rule lgs_slopes:
         calibration=lambda w: calibration_file(SLOPES_CASES[w.skey][0]),
         code=step_sources("lgs_slopes"),
     output:
-        frames_output("results/slopes/{skey}.nc"),
+        "results/slopes/{skey}.nc",  # kept, as the screens: a temporary one made again would rerun every case replaying it
     params:
         spec=lambda w: canonical_json(SLOPES[SLOPES_CASES[w.skey][0]]),
         calibration=lambda w, input: ["--calibration", input.calibration] if input.calibration else [],
@@ -37,9 +37,9 @@ rule simulate:
         reconstructor=lambda w: [] if LGS_TWIN[w.case] else reconstructor_file(w.case),
         commands=lambda w: commands_file(w.case),
         calibration=lambda w: [] if LGS_TWIN[w.case] or SLOPES[w.case] else calibration_file(w.case),
-        # ancient: a remade product (a temporary file made again for another case) or a rerun of
-        # the twin for its AO alone changes no slope; whatever does (the LGS chain's config,
-        # screens, seed, code) is this case's own params and inputs too
+        # ancient: a remade slopes product or a rerun of the twin for its AO alone changes no
+        # slope; whatever does (the LGS chain's config, screens, seed, code) is this case's own
+        # params and inputs too
         slopes=lambda w: ancient(slopes_file(w.case)) if SLOPES[w.case] else [],
         lgs_twin=lambda w: ancient(f"results/cases/{LGS_TWIN[w.case]}/telemetry.nc") if LGS_TWIN[w.case] else [],
         code=step_sources("simulation"),
