@@ -15,9 +15,14 @@ def lgs_rms_nm(reconstructor: np.ndarray, slopes_rad: np.ndarray) -> np.ndarray:
     ``reconstructor`` from :func:`target_reconstructor` (tilt removed);
     ``slopes_rad`` (..., n_beacons, 2, n_valid), one per WFS exposure.
     """
+    return _reconstructed_rms_nm(reconstructor.T, slopes_rad)
+
+
+def _reconstructed_rms_nm(reconstructor_t: np.ndarray, slopes_rad: np.ndarray) -> np.ndarray:
+    """:func:`lgs_rms_nm` given the reconstructor's transpose ``reconstructor_t`` (slope, point)."""
     flat = np.asarray(slopes_rad, dtype=np.float32)
     flat = flat.reshape(*flat.shape[:-3], -1)
-    opd = flat @ reconstructor.T
+    opd = flat @ reconstructor_t
     return np.sqrt(np.mean(opd**2, axis=-1)) * 1e9
 
 
@@ -37,9 +42,13 @@ class LgsRmsEstimator:
         self.reconstructors = np.asarray(reconstructors, dtype=np.float32)
         if self.reconstructors.shape[-1] != n_slopes:
             raise ValueError("the reconstructor does not match this WFS: rebuild it")
+        # (target, slope, point), C-contiguous: OpenBLAS packs it for the product faster than the
+        # (point, slope) array's transpose (a quarter of the time at 8.2 m), into the same panels
+        # for the same kernel: the same sums
+        self._transposed = np.ascontiguousarray(self.reconstructors.transpose(0, 2, 1))
 
     def rms_nm(self, slopes: np.ndarray) -> np.ndarray:
         """Each target's reconstructed tilt-removed rms [nm] (n_targets, ...) from
         slopes (..., n_beacons, 2, n_valid): a frame's exposures in one call read
         the reconstructors once."""
-        return np.array([lgs_rms_nm(r, slopes) for r in self.reconstructors])
+        return np.array([_reconstructed_rms_nm(r, slopes) for r in self._transposed])
