@@ -16,14 +16,16 @@ import numpy as np
 from ..atmosphere.screens import ScreenSet
 from ..atmosphere.statistics import Layer
 from ..geometry import LineOfSight, footprint_m, footprint_scale
+from ..simd import LANES, fmuladd
 from .pupil import PupilGrid
+from .taps import column_taps, row_taps
 
 _U = numba.uint64  # unsigned indices: numba emits no negative-index wraparound code
 
 
-@numba.njit(cache=True, fastmath=True, nogil=True)
+@numba.njit(cache=True, fastmath={"contract"}, nogil=True)
 def _sample_kernel(screens, starts, n_major, n_minor, skew, major_axis, flow, u0, w0, beta, steps, layer_scales,
-                   column_runs, column_ptr, row_runs, row_ptr, out):  # pragma: no cover (jit)
+                   column_runs, column_ptr, column_codes, row_runs, row_ptr, out):  # pragma: no cover (jit)
     """out[s, d, y, x] = sum_l layer_scales[s, l] bilinear(screen_l at the footprint of grid
     point (y, x) along line of sight d at time step steps[s]).
 
@@ -37,25 +39,27 @@ def _sample_kernel(screens, starts, n_major, n_minor, skew, major_axis, flow, u0
     beta[d, l] b``. Lines are grid rows (y) when the major axis is y, else
     columns. Per line the two screen lines ``floor(u)`` and ``+1`` are
     contiguous: they are interpolated first (vectorised), into ``between``;
-    then the minor taps and weights, shared by all lines, are applied to two
-    lines at a time. Only the mask's samples are computed: ``runs[ptr[p]:ptr[p + 1]]``
-    are the (start, end, lines) runs of line pair ``p`` (lines 1: the first,
-    2: the second, 3: both; :func:`_pair_runs`). Footprints stay on the screens
-    (checked by the caller), so every index is non-negative: indices are
-    unsigned, which spares the wraparound code.
+    then the minor taps and weights, shared by all lines, are applied
+    (:mod:`luckyao.optics.taps`): along a row, LANES points at a time; across
+    columns, one point of LANES columns at a time, so that the grid is read
+    and written contiguously. Only the mask's samples are computed:
+    ``runs[ptr[p]:ptr[p + 1]]`` are the (start, end, lines) runs of line pair
+    ``p`` (lines 1: the first, 2: the second, 3: both; :func:`_pair_runs`),
+    ``column_codes`` the same per grid point (:func:`_column_codes`).
+    Footprints stay on the screens (checked by the caller), so every index is
+    non-negative: indices are unsigned, which spares the wraparound code.
+    Fast-math is contraction only: sums are associated as written.
     """
     n_steps, n_dir, n, _ = out.shape
-    tap = np.empty(n, np.uint64)
+    tap = np.empty(n, np.int32)  # gather indices
     weight = np.empty(n, np.float32)
-    between = np.empty((2, int(beta.max() * n) + 4), np.float32)  # taps reach beta (n - 1) + 2
+    # between lines: a row pair's (rows 0, 1) or LANES columns'; taps reach beta (n - 1) + 2
+    between = np.zeros((LANES, int(beta.max() * n) + 4), np.float32)
     out[:] = 0.0
     for l in range(starts.shape[0]):  # layer-major: footprints of one layer share cached screen lines
-        if major_axis[l] == 1:  # lines are rows, points along x
-            runs, ptr, line_stride, point_stride = row_runs, row_ptr, n, 1
-        else:  # lines are columns: a column's points are n apart, its neighbours share cache lines
-            runs, ptr, line_stride, point_stride = column_runs, column_ptr, 1, n
+        rows = major_axis[l] == 1  # lines are rows (points along x), else columns
+        runs, ptr = (row_runs, row_ptr) if rows else (column_runs, column_ptr)
         m, k, n_lines = n_minor[l], skew[l], n_major[l]
-        stride = _U(point_stride)
         for s in range(n_steps):
             scale = np.float32(layer_scales[s, l])
             for d in range(n_dir):
@@ -66,43 +70,56 @@ def _sample_kernel(screens, starts, n_major, n_minor, skew, major_axis, flow, u0
                 for b in range(n):
                     w = w_first - first + beta[d, l] * b
                     j = np.uint64(w)
-                    tap[b] = j
+                    tap[b] = np.int32(j)
                     weight[b] = np.float32(w - j)
-                for p in range(ptr.size - 1):
-                    if ptr[p + 1] == ptr[p]:
-                        continue
-                    j_lo = tap[runs[ptr[p], 0]]
-                    j_hi = tap[runs[ptr[p + 1] - 1, 1] - 1] + _U(2)
-                    for h in range(min(2, n - 2 * p)):  # along the major axis first
-                        u = u_first + beta[d, l] * (2 * p + h)
-                        i = np.int64(u)
-                        f = np.float32(u - i)
-                        near = _U(starts[l] + i * m - (k * i) // n_lines + np.int64(first))
-                        far = _U(starts[l] + (i + 1) * m - (k * (i + 1)) // n_lines + np.int64(first))
-                        g_near = scale * (np.float32(1.0) - f)
-                        g_far = scale * f
-                        line = between[h]
-                        for j in range(j_lo, j_hi):
-                            line[j] = g_near * screens[near + j] + g_far * screens[far + j]
-                    first_line, second_line = between[0], between[1]
-                    o0 = _U(2 * p * line_stride)
-                    o1 = o0 + _U(line_stride)
-                    for r in range(ptr[p], ptr[p + 1]):  # then the minor taps, shared by the pair
-                        lines = runs[r, 2]
-                        if lines == 3:
-                            for b in range(_U(runs[r, 0]), _U(runs[r, 1])):
-                                t, c = tap[b], weight[b]
-                                s0, s1 = first_line[t], first_line[t + _U(1)]
-                                q0, q1 = second_line[t], second_line[t + _U(1)]
-                                grid[o0 + b * stride] += s0 + c * (s1 - s0)
-                                grid[o1 + b * stride] += q0 + c * (q1 - q0)
-                        else:
-                            values = first_line if lines == 1 else second_line
-                            o = o0 if lines == 1 else o1
-                            for b in range(_U(runs[r, 0]), _U(runs[r, 1])):
-                                t, c = tap[b], weight[b]
-                                s0, s1 = values[t], values[t + _U(1)]
-                                grid[o + b * stride] += s0 + c * (s1 - s0)
+                start = starts[l] + np.int64(first)
+                if rows:
+                    for p in range(ptr.size - 1):
+                        if ptr[p + 1] == ptr[p]:
+                            continue
+                        j_lo, j_hi = _tap_range(tap, runs, ptr, p)
+                        for h in range(min(2, n - 2 * p)):  # along the major axis first
+                            _between(screens, start, m, k, n_lines, u_first + beta[d, l] * (2 * p + h), scale,
+                                     j_lo, j_hi, between[h])
+                        for r in range(ptr[p], ptr[p + 1]):  # then the minor taps
+                            lo, hi, lines = runs[r, 0], runs[r, 1], runs[r, 2]
+                            for b in range(lo, hi, LANES):
+                                row_taps(between, tap, weight, b, min(LANES, hi - b), lines, grid, 2 * p * n, n)
+                else:
+                    for x0 in range(0, n, LANES):
+                        width = min(LANES, n - x0)
+                        y_lo, y_hi = n, 0
+                        for x in range(x0, x0 + width):  # along the major axis first
+                            p = x // 2
+                            if ptr[p + 1] == ptr[p]:
+                                continue
+                            y_lo, y_hi = min(y_lo, runs[ptr[p], 0]), max(y_hi, runs[ptr[p + 1] - 1, 1])
+                            j_lo, j_hi = _tap_range(tap, runs, ptr, p)
+                            _between(screens, start, m, k, n_lines, u_first + beta[d, l] * x, scale, j_lo, j_hi,
+                                     between[x - x0])
+                        for y in range(y_lo, y_hi):  # then the minor taps
+                            column_taps(between, tap, weight, y, grid, y * n + x0, column_codes, width)
+
+
+@numba.njit(cache=True, fastmath={"contract"}, nogil=True, inline="always")
+def _tap_range(tap, runs, ptr, p):  # pragma: no cover (jit)
+    """The between samples [j_lo, j_hi) that line pair ``p``'s runs read."""
+    return _U(tap[runs[ptr[p], 0]]), _U(tap[runs[ptr[p + 1] - 1, 1] - 1]) + _U(2)
+
+
+@numba.njit(cache=True, fastmath={"contract"}, nogil=True, inline="always")
+def _between(screens, start, m, k, n_lines, u, scale, j_lo, j_hi, line):  # pragma: no cover (jit)
+    """line[j] = scale x (the strip interpolated at major coordinate ``u`` [samples], minor sample j)
+    for j_lo <= j < j_hi: screen lines ``floor(u)`` and ``+1`` (of ``m`` samples, skewed by ``k``
+    over ``n_lines``) from ``start``."""
+    i = np.int64(u)
+    f = np.float32(u - i)
+    near = _U(start + i * m - (k * i) // n_lines)
+    far = _U(start + (i + 1) * m - (k * (i + 1)) // n_lines)
+    g_near = scale * (np.float32(1.0) - f)
+    g_far = scale * f
+    for j in range(j_lo, j_hi):
+        line[j] = fmuladd(g_far, screens[far + j], g_near * screens[near + j])
 
 
 @numba.njit(cache=True, nogil=True)
@@ -137,6 +154,7 @@ class Propagator:
         self._column_runs = _runs(mask.T)
         self._row_pairs = _pair_runs(mask)
         self._column_pairs = _pair_runs(mask.T)
+        self._column_codes = _column_codes(mask)
         self._screens = screens.flat
         self._starts = screens.starts
         self._n_major = np.array([s.n_major for s in specs], dtype=np.int64)
@@ -203,7 +221,7 @@ class Propagator:
             raise ValueError(f"out must be C-contiguous float32 of shape {(len(steps), n_los, n, n)}")
         _sample_kernel(self._screens, self._starts, self._n_major, self._n_minor, self._skew, self._major_axis,
                        self._step, self._u0, self._w0, self._beta, steps, scales,
-                       *self._column_pairs, *self._row_pairs, out)
+                       *self._column_pairs, self._column_codes, *self._row_pairs, out)
         return out
 
     def sample_valid(self, steps, layer_scales, out: np.ndarray | None = None) -> np.ndarray:
@@ -235,6 +253,16 @@ def _pair_runs(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     where only row 2p is true, 2 where only row 2p + 1 is, 3 where both are."""
     rows = np.pad(mask.astype(np.int8), ((0, mask.shape[0] % 2), (0, 0)))
     return _code_runs(rows[0::2] + 2 * rows[1::2])
+
+
+def _column_codes(mask: np.ndarray) -> np.ndarray:
+    """Flat int8 code of each grid point, its column pair's ``lines`` (:func:`_pair_runs` of
+    ``mask.T``) seen from its own column: 3 where the point and its neighbour in the pair
+    (column ``x ^ 1``) are true, 1 where only the point is, 0 where it is false."""
+    n = mask.shape[1]
+    padded = np.pad(mask, ((0, 0), (0, n % 2)))
+    neighbour = padded.reshape(mask.shape[0], -1, 2)[:, :, ::-1].reshape(mask.shape[0], -1)[:, :n]
+    return (mask * np.where(neighbour, 3, 1)).astype(np.int8).reshape(-1)
 
 
 def _code_runs(code: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
