@@ -100,3 +100,45 @@ def fmuladd(typingctx, a, b, c):
         return call(builder, "llvm.fmuladd.f32", F32, list(args))
 
     return types.float32(a, b, c), codegen
+
+
+
+@intrinsic
+def transpose(typingctx, values, offset, index, start, rows, columns, out, out_start, out_stride):
+    """``out[out_start + c out_stride + r] = values[offset + index[start + r] + c]`` for
+    ``r < rows <= LANES``, ``c < columns <= LANES`` (jit only): a block of rows, each
+    ``columns`` contiguous float32, written as columns, through registers (16 loads,
+    64 two-register shuffles, 16 stores for 16 x 16). ``values``, ``out`` float32,
+    ``index`` int32, all C-contiguous; nothing is bounds-checked."""
+    arrays = (values, index, out)
+    if not all(isinstance(a, types.Array) and a.layout == "C" for a in arrays):
+        raise TypingError("transpose: arrays must be C-contiguous")
+    if values.dtype != types.float32 or out.dtype != types.float32 or index.dtype != types.int32:
+        raise TypingError("transpose: float32 values and out, int32 index")
+
+    def codegen(context, builder, signature, args):
+        values_, index_, out_ = (context.make_array(signature.args[i])(context, builder, args[i]) for i in (0, 2, 6))
+        offset, start, rows, columns, out_start, out_stride = (
+            context.cast(builder, args[i], signature.args[i], types.int64) for i in (1, 3, 4, 5, 7, 8))
+        base = builder.gep(values_.data, [offset])
+        in_rows, in_columns = first_lanes(builder, rows), first_lanes(builder, columns)
+        starts = load(builder, builder.gep(index_.data, [start]), in_rows, ir.VectorType(_I32, LANES))
+        block = []
+        for r in range(LANES):  # rows past ``rows``: nothing read, nothing stored
+            row = builder.sext(builder.extract_element(starts, ir.Constant(_I32, r)), start.type)
+            read = builder.and_(in_columns, splat(builder, builder.extract_element(in_rows, ir.Constant(_I32, r))))
+            block.append(load(builder, builder.gep(base, [row]), read))
+        for bit in (1, 2, 4, 8):  # swap bit ``bit`` of the row and column indices
+            low = ir.Constant(ir.VectorType(_I32, LANES), [LANES + (c ^ bit) if c & bit else c for c in range(LANES)])
+            high = ir.Constant(ir.VectorType(_I32, LANES), [LANES + c if c & bit else c ^ bit for c in range(LANES)])
+            for r in range(LANES):
+                if not r & bit:
+                    block[r], block[r | bit] = (builder.shuffle_vector(block[r], block[r | bit], low),
+                                                builder.shuffle_vector(block[r], block[r | bit], high))
+        for c in range(LANES):
+            with builder.if_then(builder.icmp_signed("<", ir.Constant(columns.type, c), columns)):
+                point = builder.add(out_start, builder.mul(out_stride, ir.Constant(out_stride.type, c)))
+                store(builder, block[c], builder.gep(out_.data, [point]), in_rows)
+        return context.get_dummy_value()
+
+    return types.void(values, offset, index, start, rows, columns, out, out_start, out_stride), codegen

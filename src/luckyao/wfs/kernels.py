@@ -32,6 +32,7 @@ import numba
 import numpy as np
 
 from ..optics.sincos import SINCOS_DIGEST
+from ..simd import LANES, transpose
 from . import drivers
 from .codelets import Codelet, dft, load_module, term_value
 
@@ -199,16 +200,15 @@ def _generated(name: str, *size: int):
 # --- stages with run-time sizes -----------------------------------------------------
 @numba.njit(cache=True, nogil=True)
 def gather(phase, source, row_m, n_in, phi):  # pragma: no cover (jit)
-    """phi[x, y, l] = phase[source[l] + y row_m + x]: a chunk's blocks, lanes innermost
-    (8 at a time: ``lanes`` is a multiple of 8)."""
+    """phi[x, y, l] = phase[source[l] + y row_m + x]: a chunk's blocks, lanes innermost;
+    16 lanes' rows of 16 x at a time, transposed in registers (:func:`luckyao.simd.transpose`)."""
     lanes = source.size
-    for first in range(0, lanes, 8):
+    for first in range(0, lanes, LANES):
+        rows = min(LANES, lanes - first)
         for y in range(n_in):
-            for x in range(n_in):
-                o = _U((x * n_in + y) * lanes + first)
-                d = _U(y * row_m + x)
-                for k in range(8):
-                    phi[o + _U(k)] = phase[_U(source[first + k]) + d]
+            for x in range(0, n_in, LANES):
+                transpose(phase, y * row_m + x, source, first, rows, min(LANES, n_in - x), phi,
+                          (x * n_in + y) * lanes + first, n_in * lanes)
 
 
 @numba.njit(cache=True, nogil=True)
@@ -327,6 +327,6 @@ def uplink_kernel(n_fft: int, n_launch: int, n_steps: int, n_beacons: int, n_lag
     return _driver(drivers.uplink_otf, (n_fft, n_launch, n_steps, n_beacons, n_lags), {
         "n_fft": n_fft, "n_launch": n_launch, "n_steps": n_steps, "n_beacons": n_beacons, "n_lags": n_lags,
         "lanes": lanes, "n_q": 2 * n_lags - 1,
-        "sources": f"np.minimum(np.arange({lanes}), {n_fields - 1}) * {n_launch * n_launch}"}, {
+        "sources": f"(np.minimum(np.arange({lanes}), {n_fields - 1}) * {n_launch * n_launch}).astype(np.int32)"}, {
         "columns": ("columns", n_fft, n_launch, lanes), "correlate": ("correlate", n_fft, n_launch, lanes, n_lags),
         "spectrum": ("spectrum", n_fft, lanes, n_lags)})

@@ -354,7 +354,7 @@ class _ExposurePlan:
     uplink_otf: object            # luckyao.wfs.kernels.uplink_kernel(...)
     n_fft: int
     n_lags: int
-    sources: np.ndarray           # (n_chunks, L) int64 offset of each lane's block in one step
+    sources: np.ndarray           # (n_chunks, L) int32 offset of each lane's block in one step
     amp: np.ndarray               # (n_amp, n_s n_s L) float32 transmission [x, y, lane]
     lane_subaperture: np.ndarray  # (n_amp, L) int64
     q_index: np.ndarray           # (n_q,) int64 harmonic q = -(n_lags - 1) .. n_lags - 1, mod M
@@ -394,7 +394,7 @@ def _exposure_plan(wfs: ShackHartmann, n_beacons: int, uplink_steps: int) -> _Ex
         exposure_kernel(n_fft, n_s, lanes, n_lags, wfs.n_pixels),
         uplink_kernel(_next_pow2(2 * n_launch), n_launch, uplink_steps, n_beacons, n_lags)
         if uplink_steps else None,
-        n_fft, n_lags, sources.astype(np.int64), np.ascontiguousarray(amp),
+        n_fft, n_lags, sources.astype(np.int32), np.ascontiguousarray(amp),
         np.where(v < n_v, v, -1).reshape(n_amp, lanes), q % wfs.fft_size, point_line,
         np.ascontiguousarray(ey), np.ascontiguousarray(ex),
         np.ones((n_beacons, q.size, n_lags), dtype=np.complex64), launch_amp.reshape(-1), {})
