@@ -1,10 +1,18 @@
-"""LLVM vector intrinsics: the register transpose moves every value where the scalar loops do."""
+"""LLVM vector intrinsics: the register transpose moves every value where the scalar loops do;
+the kernels' files follow the intrinsics they inline."""
+
+import hashlib
+from pathlib import Path
 
 import numba
 import numpy as np
 import pytest
 
+import luckyao
 from luckyao.simd import LANES, transpose
+
+INLINED = {"optics/propagation.py": ("optics/taps.py", "simd.py"), "wfs/kernels.py": ("simd.py",)}
+"""Files of cached kernels -> the files of the intrinsics those kernels inline."""
 
 
 @numba.njit
@@ -24,3 +32,13 @@ def test_transpose_moves_each_value_once(n, rows):
     out = np.full((n, rows), np.nan, dtype=np.float32)
     _blocks_transposed(values, starts, n, rows, out.reshape(-1))
     np.testing.assert_array_equal(out, values[starts[None, :] + np.arange(n)[:, None]])
+
+
+@pytest.mark.parametrize("kernels, intrinsics", INLINED.items())
+def test_kernel_files_carry_the_digest_of_their_intrinsics(kernels, intrinsics):
+    """numba's disk cache keys a kernel by its own file: a file whose kernels inline intrinsics
+    of other files carries their digest, so that an edit of theirs changes it (recompiles)."""
+    root = Path(luckyao.__file__).parent
+    digest = hashlib.sha256(b"".join((root / name).read_bytes() for name in intrinsics)).hexdigest()[:16]
+    line = f"# intrinsics digest ({', '.join(intrinsics)}): {digest}"
+    assert line in (root / kernels).read_text(), f"{kernels} needs the line: {line}"

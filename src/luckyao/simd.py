@@ -1,4 +1,5 @@
-"""LLVM IR helpers for numba intrinsics that work on ``LANES`` float32 at once.
+"""LLVM IR helpers for numba intrinsics that work on ``LANES`` float32 at once, and two such
+intrinsics: :func:`fmuladd`, :func:`transpose`.
 
 Numba's LLVM leaves a loop scalar when its loads are indexed
 (``values[index[k]]``: it cannot bound them for its run-time alias checks),
@@ -13,6 +14,7 @@ or the CPU has none (``generic``: SSE2) it lowers them to scalar loads.
 multiply then an add: what numba's ``contract`` fast-math flag gives. So an
 intrinsic gives the bits of the scalar code it replaces on every CPU, however
 it is lowered (checked against the scalar kernels compiled for each target).
+:func:`transpose` moves values only, by shuffles of whole registers.
 """
 
 from llvmlite import ir
@@ -37,11 +39,11 @@ def call(builder, name: str, result: ir.Type, args: list):
     return builder.call(cgutils.get_or_insert_function(builder.module, function_type, name), args)
 
 
-def splat(builder, value, lanes: int = LANES):
+def splat(builder, value):
     """``value`` in every lane."""
-    vector = ir.VectorType(value.type, lanes)
+    vector = ir.VectorType(value.type, LANES)
     single = builder.insert_element(ir.Constant(vector, None), value, ir.Constant(_I32, 0))
-    zeros = ir.Constant(ir.VectorType(_I32, lanes), [0] * lanes)
+    zeros = ir.Constant(ir.VectorType(_I32, LANES), [0] * LANES)
     return builder.shuffle_vector(single, ir.Constant(vector, None), zeros)
 
 
@@ -102,7 +104,6 @@ def fmuladd(typingctx, a, b, c):
     return types.float32(a, b, c), codegen
 
 
-
 @intrinsic
 def transpose(typingctx, values, offset, index, start, rows, columns, out, out_start, out_stride):
     """``out[out_start + c out_stride + r] = values[offset + index[start + r] + c]`` for
@@ -128,7 +129,7 @@ def transpose(typingctx, values, offset, index, start, rows, columns, out, out_s
             row = builder.sext(builder.extract_element(starts, ir.Constant(_I32, r)), start.type)
             read = builder.and_(in_columns, splat(builder, builder.extract_element(in_rows, ir.Constant(_I32, r))))
             block.append(load(builder, builder.gep(base, [row]), read))
-        for bit in (1, 2, 4, 8):  # swap bit ``bit`` of the row and column indices
+        for bit in (1 << b for b in range(LANES.bit_length() - 1)):  # swap that bit of the row and column indices
             low = ir.Constant(ir.VectorType(_I32, LANES), [LANES + (c ^ bit) if c & bit else c for c in range(LANES)])
             high = ir.Constant(ir.VectorType(_I32, LANES), [LANES + c if c & bit else c ^ bit for c in range(LANES)])
             for r in range(LANES):

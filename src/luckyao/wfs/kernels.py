@@ -36,6 +36,10 @@ from ..simd import LANES, transpose
 from . import drivers
 from .codelets import Codelet, dft, load_module, term_value
 
+# numba's disk cache keys a kernel by its own file: this digest of the intrinsics the kernels
+# inline makes an edit of theirs recompile them (tests/test_simd.py keeps it current)
+# intrinsics digest (simd.py): daeb58b0a378bd2c
+
 _U = numba.uint64  # unsigned offsets keep the lane loops vectorisable
 _FASTMATH = {"contract"}  # fused multiply-adds; no reassociation
 _LAG_GROUP = 8  # lags accumulated together in registers by the autocorrelation
