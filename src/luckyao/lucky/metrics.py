@@ -22,7 +22,7 @@ import pyfftw
 import scipy.fft
 import scipy.special
 
-from .kernels import component, dilate, dirichlet, first_crossing, radial_energy
+from .kernels import component, dilate, dirichlet, first_crossing, radial_energies, radial_energy
 
 
 def centroid_px(images: np.ndarray) -> np.ndarray:
@@ -199,16 +199,17 @@ class EncircledEnergy:
         spectrum = pyfftw.empty_aligned((n, n // 2 + 1), dtype=np.complex64)
         return frame, spectrum, pyfftw.FFTW(frame, spectrum, axes=(0, 1), flags=("FFTW_ESTIMATE",), threads=1)
 
-    def fractions_binned(self, images: np.ndarray, centres_px: np.ndarray,
-                         flux: np.ndarray | None = None, spectra=None) -> np.ndarray:
-        """:meth:`fractions` of images (k, n, n) about ``centres_px`` (k, 2), shape
-        (k, n_radii), summed otherwise: the terms of equal ``|f|`` first (float64, one
-        kernel value each), then (k, bins) @ (bins, n_radii) in float64. The same sum in
-        another order (agrees to float32 rounding); ~4x fewer operations. The spectra are
-        FFTW's (float32, one frame at a time: :attr:`_rfft2`), not scipy's as in
-        :meth:`fractions`: the same transform to float32 rounding. ``flux`` (k,): the images'
-        sums if known (float64; default: summed here). ``spectra``: the images' spectra if known
-        (:class:`.registration.FrameSpectra`, the same FFTW transform), else made here."""
+    def energies_binned(self, images: np.ndarray, centres_px: np.ndarray, spectra=None,
+                        which: np.ndarray | None = None) -> np.ndarray:
+        """The encircled energies ``EE(R)`` (k, n_radii) on ``radii_px`` of images (k, n, n) about
+        ``centres_px`` (k, 2) (not divided by the flux: linear in the image, so a sum of images
+        has the sum of their energies), summed otherwise than :meth:`fractions`: the terms of
+        equal ``|f|`` first (float64, one kernel value each), then (k, bins) @ (bins, n_radii) in
+        float64. The same sum in another order (agrees to float32 rounding); ~4x fewer
+        operations. The spectra are FFTW's (float32, one frame at a time: :attr:`_rfft2`), not
+        scipy's as in :meth:`fractions`: the same transform to float32 rounding. ``spectra``: the
+        images' spectra if known (:class:`.registration.FrameSpectra`, the same FFTW transform),
+        else made here. ``which`` (k,) bool: only those images' energies (the others' rows 0)."""
         images = np.asarray(images)
         n = self.n_pixels
         if images.ndim != 3 or images.shape[1:] != (n, n):
@@ -216,23 +217,60 @@ class EncircledEnergy:
         fy, fx, row_end, bin_of, weight, kernel = self._radial
         centres = np.asarray(centres_px, dtype=np.float64).reshape(-1, 2)
         frame, spectrum, fft = self._rfft2
-        binned = np.empty((len(images), kernel.shape[0]))
+        binned = np.zeros((len(images), kernel.shape[0]))
         for j, image in enumerate(images):
+            if which is not None and not which[j]:
+                continue
             if spectra is None:
                 np.copyto(frame, image, casting="same_kind")
                 fft.execute()
             radial_energy(spectrum if spectra is None else spectra.spectrum(j), centres[j], fy, fx, row_end, bin_of,
                           weight, binned[j])
-        if flux is None:
-            flux = images.sum(axis=(-2, -1), dtype=np.float64)
+        return binned @ kernel
+
+    def energies_binned_about(self, images: np.ndarray, centres_px: np.ndarray, spectra=None) -> np.ndarray:
+        """:meth:`energies_binned` of images (k, n, n) about several centres each, ``centres_px``
+        (k, m, 2): (k, m, n_radii), each image's spectrum read once for its ``m`` centres
+        (:func:`luckyao.lucky.kernels.radial_energies`; the same sums to ~1e-14)."""
+        images = np.asarray(images)
+        fy, fx, row_end, bin_of, weight, kernel = self._radial
+        frame, spectrum, fft = self._rfft2
+        centres = np.ascontiguousarray(centres_px, dtype=np.float64)
+        k, m = centres.shape[:2]
+        binned = np.empty((k, kernel.shape[0], m))
+        for j, image in enumerate(images):
+            if spectra is None:
+                np.copyto(frame, image, casting="same_kind")
+                fft.execute()
+            radial_energies(spectrum if spectra is None else spectra.spectrum(j), centres[j], fy, fx, row_end,
+                            bin_of, weight, binned[j])
+        return (binned.transpose(0, 2, 1).reshape(k * m, -1) @ kernel).reshape(k, m, -1)
+
+    def fractions_binned(self, images: np.ndarray, centres_px: np.ndarray,
+                         flux: np.ndarray | None = None, spectra=None) -> np.ndarray:
+        """:meth:`fractions` of images (k, n, n) about ``centres_px`` (k, 2), shape (k, n_radii):
+        :meth:`energies_binned` over ``flux`` (k,), the images' sums if known (float64; default:
+        summed here)."""
+        return self.fractions_of(self.energies_binned(images, centres_px, spectra),
+                                 images.sum(axis=(-2, -1), dtype=np.float64) if flux is None else flux)
+
+    @staticmethod
+    def fractions_of(energies: np.ndarray, flux: np.ndarray) -> np.ndarray:
+        """Encircled-energy fractions ``EE(R) / F`` (..., n_radii) of energies (..., n_radii) and
+        fluxes (...); NaN where the flux is not positive."""
         flux = np.asarray(flux, dtype=np.float64)
         with np.errstate(invalid="ignore", divide="ignore"):
-            return np.where(flux[:, None] > 0, (binned @ kernel) / flux[:, None], np.nan)
+            return np.where(flux[..., None] > 0, energies / flux[..., None], np.nan)
 
     def radius_px_binned(self, images: np.ndarray, centres_px: np.ndarray, level: float = 0.5,
                          flux: np.ndarray | None = None, spectra=None) -> np.ndarray:
         """:meth:`radius_px` of images (k, n, n) from :meth:`fractions_binned`, shape (k,)."""
         return _first_crossing(self.radii_px, self.fractions_binned(images, centres_px, flux, spectra), level)
+
+    def radius_px_of(self, energies: np.ndarray, flux: np.ndarray, level: float = 0.5) -> np.ndarray:
+        """:meth:`radius_px` of images whose encircled energies on ``radii_px`` are ``energies``
+        (..., n_radii) (:meth:`energies_binned`, or a sum of them) and fluxes ``flux`` (...)."""
+        return _first_crossing(self.radii_px, self.fractions_of(energies, flux), level)
 
     def radius_px(self, images: np.ndarray, level: float = 0.5,
                   centres_px: np.ndarray | None = None) -> np.ndarray:
