@@ -490,14 +490,18 @@ def radial_energy(spectrum, centre, fy, fx, row_end, bin_of, weight, out):  # pr
         a = 2 * np.pi * centre[1] * fx[x]
         px_re[x] = math.cos(a)
         px_im[x] = math.sin(a)
+    term = np.empty(m)
     for y in range(spectrum.shape[0]):
         a = 2 * np.pi * centre[0] * fy[y]
         cy, sy = math.cos(a), math.sin(a)
-        for x in range(row_end[y]):
-            z = spectrum[y, x]
+        end, row, w, bins = row_end[y], spectrum[y], weight[y], bin_of[y]
+        for x in range(end):  # a row's terms first (vectorised), then added to their bins in order
+            z = row[x]
             pr = cy * px_re[x] - sy * px_im[x]
             pi = cy * px_im[x] + sy * px_re[x]
-            out[bin_of[y, x]] += weight[y, x] * (z.real * pr - z.imag * pi)
+            term[x] = w[x] * (z.real * pr - z.imag * pi)
+        for x in range(end):
+            out[bins[x]] += term[x]
 
 
 @numba.njit(cache=True, nogil=True, fastmath={"contract"})

@@ -113,22 +113,29 @@ class MethodRun:
                 self.bins[i, c] = criterion_bins(self.values[c, i], larger[c], counts)
         self.blocks.assign(self.values, larger, crits)
 
-    def measures(self, spectra: FrameSpectra, common: tuple[np.ndarray, ...]) -> tuple[np.ndarray, ...]:
+    def registered(self, spectra: FrameSpectra, common: tuple[np.ndarray, ...]) -> np.ndarray | None:
+        """The registered positions (k, 2) of the frames (k, n, n) of ``spectra`` whose flux, centre
+        of gravity and Strehl are ``common`` (:meth:`.pipeline._LuckyRun.common_measures`); None
+        with a reference (its positions are the reference's)."""
+        if self.frames.reference is not None:
+            return None
+        return self.registration.positions_px(spectra.frames, common[1], spectra)
+
+    def measures(self, spectra: FrameSpectra, common: tuple[np.ndarray, ...], registered: np.ndarray | None,
+                 energies: np.ndarray | None) -> tuple[np.ndarray, ...]:
         """Flux, centre of gravity, Strehl, d50 [pixel] (about the registered position; the centre
-        of gravity with ``cog``) and registered position of the frames (k, n, n) of ``spectra``
-        whose flux, centre of gravity and Strehl are ``common``
-        (:meth:`.pipeline._LuckyRun.common_measures`: they do not depend on the method), and for a
-        sub-pixel method their encircled energies about the registered position (its d50's, and
-        added into its sums: :class:`.cropped.CroppedFrames`); with a reference, their flux only."""
+        of gravity with ``cog``) and registered position (:meth:`registered`) of the frames (k, n, n)
+        of ``spectra`` whose flux, centre of gravity and Strehl are ``common`` (they do not depend on
+        the method), and for a sub-pixel method their encircled ``energies`` (k, n_radii) about the
+        registered positions (its d50's, and added into its sums: :class:`.cropped.CroppedFrames`);
+        with a reference, their flux only."""
         flux, centroids, strehl = common
         if self.frames.reference is not None:
             return (flux,)
-        frames, encircled = spectra.frames, self.run.encircled
-        registered = self.registration.positions_px(frames, centroids, spectra)
+        encircled = self.run.encircled
         if not self.registration.subpixel:
-            radius = encircled.radius_px_binned(frames, registered, flux=flux, spectra=spectra)
+            radius = encircled.radius_px_binned(spectra.frames, registered, flux=flux, spectra=spectra)
             return flux, centroids, strehl, d50_from_radius(radius, 1.0), registered
-        energies = encircled.energies_binned(frames, registered, spectra)
         radius = encircled.radius_px_of(energies, flux)
         return flux, centroids, strehl, d50_from_radius(radius, 1.0), registered, energies
 

@@ -254,6 +254,22 @@ class _LuckyRun:
             return flux, centroids, self.matched_strehl(spectra.frames, flux, spectra)
         return flux, centroids, strehl_from(peak, flux, self.peak)
 
+    def measures(self, spectra: FrameSpectra, common: tuple[np.ndarray, ...]) -> list[tuple[np.ndarray, ...]]:
+        """Every method's measures (:meth:`.MethodRun.measures`) of the frames of ``spectra`` whose
+        flux, centre of gravity and Strehl are ``common``; the sub-pixel methods' encircled
+        energies about their registered positions all from one reading of each frame's spectrum
+        (:meth:`.metrics.EncircledEnergy.energies_binned_about`)."""
+        registered = [method.registered(spectra, common) for method in self.methods]
+        about = [j for j, (method, r) in enumerate(zip(self.methods, registered))
+                 if method.registration.subpixel and r is not None]
+        energies = [None] * len(self.methods)
+        if about:
+            centres = np.stack([registered[j] for j in about], axis=1)  # (k, methods, 2)
+            for j, e in zip(about, self.encircled.energies_binned_about(spectra.frames, centres, spectra)
+                            .transpose(1, 0, 2)):
+                energies[j] = e
+        return [method.measures(spectra, common, r, e) for method, r, e in zip(self.methods, registered, energies)]
+
     def measure_noiseless(self) -> None:
         """Pass 0 (guessing only): the noiseless frames' measures by every method, the guesses'
         predictor (and the noiseless detectors' measures)."""
@@ -264,8 +280,8 @@ class _LuckyRun:
         for sl, unit in self._chunks("pass 0/2: noiseless frames"):
             spectra = self.unit.reset(unit)
             common = self.common_measures(spectra, *frame_sums(unit))
-            for method, whole in zip(self.methods, clean):
-                for to, part in zip(whole, method.measures(spectra, common)):
+            for whole, measured in zip(clean, self.measures(spectra, common)):
+                for to, part in zip(whole, measured):
                     to[sl] = part
         for method, whole in zip(self.methods, clean):
             method.keep_noiseless(whole)
@@ -288,14 +304,14 @@ class _LuckyRun:
                     detected, rows, cols, peak = chunk.detect(detector, self.seed, sl.start, self.noise.buffer)
                     spectra = self.detected.reset(detected)
                     common = self.common_measures(spectra, rows, cols, peak)
-                    measures = [method.measures(spectra, common) for method in self.methods]
+                    measures = self.measures(spectra, common)
                 elif self.clean is not None:  # measured in pass 0
                     spectra = spectra_unit
                     measures = [[x[sl] for x in whole] for whole in self.clean]
                 else:
                     spectra = spectra_unit
                     common = self.common_measures(spectra, *frame_sums(unit))
-                    measures = [method.measures(spectra, common) for method in self.methods]
+                    measures = self.measures(spectra, common)
                 kernels.add_frames(spectra.frames, self.long_none[i])
                 for method, measured in zip(self.methods, measures):
                     method.add_detected(i, detector, sl, spectra, measured)
