@@ -89,24 +89,28 @@ class CroppedFrames:
         k, n, c = len(frames), self.n_pixels, self.crop_px
         which = np.ones(k, bool) if which is None else np.asarray(which, bool)
         out = np.empty((k, *self.item_shape)) if out is None else out[:k]
-        picked = np.flatnonzero(which)
-        if not picked.size:
+        if not which.any():
             return out
+        picked = slice(None) if which.all() else np.flatnonzero(which)  # a slice: no copies
         crops = np.empty((k, c, c), np.float32)
         kernels.crop_rolled(frames, shifts, which, crops)
         moving = which & np.any(remainder != 0, axis=1)
-        if moving.any():
+        if moving.all():
+            crops = fourier_shift(crops, remainder)
+        elif moving.any():
             crops[moving] = fourier_shift(crops[moving], remainder[moving])
-        out[picked, :c * c] = crops[picked].reshape(len(picked), -1)
-        n_radii = self.encircled.n_radii
+        out[picked, :c * c] = crops[picked].reshape(-1, c * c)
+        energy = slice(c * c, c * c + self.encircled.n_radii)
         known = np.zeros(k, bool) if energies is None else which & np.isfinite(energies).all(axis=1)
-        if energies is not None:
-            out[known, c * c:c * c + n_radii] = energies[known]
-        missing = which & ~known
-        if missing.any():
-            centres = n // 2 - (shifts + remainder)
-            out[missing, c * c:c * c + n_radii] = self.encircled.energies_binned(
-                frames, centres, spectra, missing)[missing]
+        if known.all():
+            out[:, energy] = energies
+        else:
+            if known.any():
+                out[known, energy] = energies[known]
+            missing = which & ~known
+            if missing.any():
+                centres = n // 2 - (shifts + remainder)
+                out[missing, energy] = self.encircled.energies_binned(frames, centres, spectra, missing)[missing]
         out[picked, -1] = flux[picked]
         return out
 
