@@ -102,7 +102,7 @@ class MethodRun:
         self.sums = PartialSums(n_det, n_crit, run.counts, self.blocks, resident=self.late if self.guessing else ())
         self.frames = FrameValues(n_det, n_frames, reference, registration)
         self.clean = self.guessed = self.accumulation = self.buffer = None
-        self.noiseless_rows = []  # (noisy detector, its rows (k, m)) of the chunk's noiseless frames, to add
+        self.pending_noiseless = []  # (noisy detector, its rows (k, m)) of the chunk's noiseless frames, to add
         self.drawn_again = np.zeros(n_det, dtype=np.int64)
 
     def assign(self, crits) -> None:
@@ -194,7 +194,7 @@ class MethodRun:
         add(prepared, shifts, np.concatenate([rows_early, rows_block, rows_guessed, rows_guessed_block], axis=1),
             sums.detected_rows[i], 1.0)
         if not detector.noiseless:  # a noiseless detector's noiseless sums are its sums (copied when scoring)
-            self.noiseless_rows.append((i, np.concatenate([rows_early[:, :-1], rows_guessed], axis=1)))
+            self.pending_noiseless.append((i, np.concatenate([rows_early[:, :-1], rows_guessed], axis=1)))
         self.accumulation.window_values(prepared, shifts, frames.in_window[i, sl])
 
     def add_noiseless(self, sl: slice, unit: FrameSpectra) -> None:
@@ -202,7 +202,7 @@ class MethodRun:
         each noisy detector's shifts into that detector's noiseless sums, in the rows
         :meth:`add_detected` gave them; a sub-pixel method measures their encircled energies about
         every detector's registered positions at once (one reading of each frame's spectrum)."""
-        pending, self.noiseless_rows = self.noiseless_rows, []
+        pending, self.pending_noiseless = self.pending_noiseless, []
         if not pending:
             return
         frames, energies = self.frames, [None] * len(pending)
