@@ -8,6 +8,8 @@ cd "$(dirname "$0")"
 
 PYTHON="${PYTHON:-python3}"
 VENV=.venv
+# the same BLAS kernels on every machine, so the same numbers (src/luckyao/__init__.py)
+export OPENBLAS_CORETYPE="${OPENBLAS_CORETYPE:-Haswell}"
 
 setup() {
     if [ ! -x "$VENV/bin/python" ]; then

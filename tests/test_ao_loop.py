@@ -236,6 +236,47 @@ def test_no_ao_case_takes_its_lgs_telemetry_from_its_twin(nine, study, tmp_path)
         twin_lgs_rms_nm(path, deep_merge(none_cfg, {"wfs": {"n_subapertures": 16}}), 5)
 
 
+# 2c ------------------------------------------------------------------------------------------
+def test_ao_cases_replay_the_slopes_their_lgs_chain_measured_once(nine, study, tmp_path):
+    """AO cases that differ only in their AO or targets (GLAO, LTAO, another DM, a field)
+    share one LGS slopes product (``config.slopes_spec``: the sensor is open loop); an AO
+    simulation replaying it gives telemetry and frames bit-identical to measuring the slopes
+    in its own loop. The product is refused for another LGS chain (a 16x16 WFS) or seed."""
+    from luckyao.study.config import lgs_chain_config, slopes_key, slopes_spec
+    from luckyao.study.datasets import provenance, write_dataset
+    from luckyao.study.lgs_slopes import RecordedSlopes, measure_lgs_slopes
+    from luckyao.tomography.criterion import LgsRmsEstimator
+
+    config, cases = study
+    shared = {slopes_key(slopes_spec(config, cases[name]))
+              for name in ("ltao_r0_13.5cm", "glao_r0_13.5cm", "ltao_dm5", "ltao_field")}
+    assert len(shared) == 1
+    assert slopes_key(slopes_spec(config, cases["ltao_wfs16"])) not in shared  # another WFS: other slopes
+    assert slopes_spec(config, cases["noao_r0_13.5cm"]) is None  # no AO: lgs_rms from its twin (2b)
+
+    duration = 0.2
+    ltao_cfg = dict(nine.config(mode="ltao"), duration_s=duration)
+    path = tmp_path / "slopes.nc"
+    spec = {"seed": 5, "screens": "nine", "case": lgs_chain_config(ltao_cfg)}
+    product = measure_lgs_slopes(spec, nine.screens, None)
+    product.attrs.update(provenance("slopes", spec, 5))
+    write_dataset(product, path, compress=False)
+    for ao in ({"mode": "ltao"}, {"mode": "glao"}, {"mode": "ltao", "n_actuators": 5}):
+        cfg = dict(nine.config(**ao), duration_s=duration)
+        built = build_commands(commands_spec(cfg))
+        commands, frames_own, frames_replayed = (built.command_matrix.values, built.dm_slopes.values), [], []
+        own = nine.simulate(cfg, commands, frames_own)
+        sensor = RecordedSlopes.open(path, cfg, 5)
+        replayed = simulate(Case.from_config(cfg), nine.screens, lambda start, f: frames_replayed.append(f.copy()),
+                            sensor, LgsRmsEstimator(nine.reconstructors, sensor.n_slopes), commands)
+        assert replayed.identical(own), ao
+        np.testing.assert_array_equal(np.concatenate(frames_replayed, 1), np.concatenate(frames_own, 1))
+    with pytest.raises(ValueError, match="seed 6"):
+        RecordedSlopes.open(path, ltao_cfg, 6)
+    with pytest.raises(ValueError, match="LGS chain"):
+        RecordedSlopes.open(path, deep_merge(ltao_cfg, {"wfs": {"n_subapertures": 16}}), 5)
+
+
 # 3 -------------------------------------------------------------------------------------------
 class _Recorder(simulation.OpenLoopCorrection):
     """The loop's correction, recording the DM surface it applies at each science step."""

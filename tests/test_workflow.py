@@ -101,8 +101,10 @@ def test_tiny_study_makes_every_figure_with_provenance(finished_run):
 def test_a_field_star_selecting_itself_is_the_single_target_case(finished_run):
     """The field case's on-axis star (target 0, its own reference) gives exactly the
     single-target case's results; the off-axis targets, replayed rather than stored,
-    get results too."""
+    get results too. The two cases' simulations replay one LGS slopes product (another
+    asterism, ``ltao_turned``, has its own): three AO cases, two measurements."""
     workdir, _ = finished_run
+    assert len(list((workdir / "results" / "benchmarks" / "slopes").glob("slopes_*.tsv"))) == 2
     single = baseline(workdir / "results" / "cases" / "ltao" / "lucky.nc")
     field = baseline(workdir / "results" / "cases" / "field" / "lucky.nc")
     assert field.sizes["target"] == 3 and int(field.reference_target) == 0

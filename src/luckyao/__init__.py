@@ -6,7 +6,15 @@ The Python interface (``luckyao.api``, loaded on first use): ``open_case``,
 """
 
 import importlib
+import os
 from importlib.metadata import PackageNotFoundError, version
+
+# OpenBLAS picks its kernels by the CPU it finds, and kernels of different CPUs round
+# differently (matrix products: the reconstructors, the encircled energies): the same config
+# and seed would give other bits on another machine. Its AVX2 (Haswell) kernels run on every
+# x86-64 CPU of the last decade; effective when set before numpy is first imported (run.sh and
+# the workflow's jobs set it in their environment).
+os.environ.setdefault("OPENBLAS_CORETYPE", "Haswell")
 
 try:
     __version__ = version("luckyao")

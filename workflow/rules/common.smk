@@ -9,10 +9,11 @@ from luckyao.study.datasets import atomic_path
 from luckyao.study.live_run import hold_shared
 from luckyao.study.resources import (commands_memory_bytes, lucky_memory_bytes, machine_memory_bytes, mem_mb,
                                      preflight, reconstructor_memory_bytes, simulate_memory_bytes,
-                                     turbulence_memory_bytes)
+                                     slopes_memory_bytes, turbulence_memory_bytes)
 from luckyao.study.config import (ConfigError, calibration_key, calibration_spec, canonical_json, commands_key,
                                   commands_spec, imaged_targets, lgs_twin, lucky_settings, plausibility_warnings,
-                                  reconstructor_key, reconstructor_spec, sha256, SIGNAL_KINDS, sweep_detectors,
+                                  reconstructor_key, reconstructor_spec, sha256, SIGNAL_KINDS, slopes_key, slopes_spec,
+                                  sweep_detectors,
                                   turbulence_key, turbulence_spec, unused_cases, validate_study)
 from luckyao.study.sweeps import expand_sweeps, sweep_points
 
@@ -46,6 +47,12 @@ COMMANDS_BY_KEY = {commands_key(s): s for s in COMMANDS.values() if s is not Non
 CALIBRATION = {name: calibration_spec(STUDY, case) for name, case in CASES.items()}
 CALIBRATION_BY_KEY = {calibration_key(s): s for s in CALIBRATION.values() if s is not None}
 LGS_TWIN = {name: lgs_twin(STUDY, CASES, name) for name in CASES}
+SLOPES = {name: slopes_spec(STUDY, case) for name, case in CASES.items()}
+SLOPES_CASES = {}
+"""The AO cases whose simulations replay each LGS slopes product, by its key."""
+for _name, _spec in SLOPES.items():
+    if _spec is not None:
+        SLOPES_CASES.setdefault(slopes_key(_spec), []).append(_name)
 LUCKYAO = ("OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1 NUMBA_NUM_THREADS=1 "
            f"{shlex.quote(sys.executable)} -m luckyao")  # every value formatted into a command is quoted (:q)
 
@@ -68,6 +75,12 @@ def calibration_file(case):
     return f"results/calibrations/{calibration_key(spec)}.nc" if spec else []
 
 
+def slopes_file(case):
+    """The AO case's LGS slopes product (config.slopes_spec), or [] without AO."""
+    spec = SLOPES[case]
+    return f"results/slopes/{slopes_key(spec)}.nc" if spec else []
+
+
 def frames_output(path):
     return path if STUDY.get("keep_frames", False) else temp(path)
 
@@ -77,6 +90,7 @@ wildcard_constraints:
     key="screens_[0-9a-f]{12}",
     rkey="reconstructor_[0-9a-f]{12}",
     ckey="commands_[0-9a-f]{12}",
+    skey="slopes_[0-9a-f]{12}",
     wkey="calibration_[0-9a-f]{12}",
     fig="|".join(re.escape(f) for f in STUDY["figures"]),
 
@@ -145,6 +159,11 @@ def simulate_priority(case):
         return len(lucky_settings(STUDY, CASES, name)["detectors"]) * len(CASES[name]["targets_arcsec"])
 
     return min(9, max(work(name) for name in CASES if name == case or LGS_TWIN[name] == case) // 2)
+
+
+def slopes_priority(key):
+    """A slopes product's scheduling priority: that of the most urgent simulation waiting for it."""
+    return max(simulate_priority(case) for case in SLOPES_CASES[key])
 
 
 def lucky_mem_mb(case):

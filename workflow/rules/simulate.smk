@@ -1,15 +1,46 @@
+rule lgs_slopes:
+    """Every WFS exposure's slopes of an LGS chain, measured once for all the AO cases that
+    differ only in their AO or targets (config.slopes_spec: GLAO, LTAO, another DM, a field):
+    the sensor is open loop, so their simulations replay the same slopes."""
+    input:
+        screens=lambda w: f"results/turbulence/{SLOPES[SLOPES_CASES[w.skey][0]]['screens']}.npy",
+        screens_metadata=lambda w: f"results/turbulence/{SLOPES[SLOPES_CASES[w.skey][0]]['screens']}.nc",
+        calibration=lambda w: calibration_file(SLOPES_CASES[w.skey][0]),
+        code=step_sources("lgs_slopes"),
+    output:
+        "results/slopes/{skey}.nc",  # kept, as the screens: a temporary one made again would rerun every case replaying it
+    params:
+        spec=lambda w: canonical_json(SLOPES[SLOPES_CASES[w.skey][0]]),
+        calibration=lambda w, input: ["--calibration", input.calibration] if input.calibration else [],
+    threads: 1
+    priority: lambda w: slopes_priority(w.skey)
+    resources:
+        mem_mb=lambda w: mem_mb(slopes_memory_bytes(CASES[SLOPES_CASES[w.skey][0]]), 3000),
+        runtime=60,  # minutes; paper fidelity: about half an LTAO simulation
+    log:
+        "logs/slopes/{skey}.log",
+    benchmark:
+        "results/benchmarks/slopes/{skey}.tsv"
+    shell:
+        "{LUCKYAO} slopes --spec {params.spec:q} --screens {input.screens:q}"
+        " --screens-metadata {input.screens_metadata:q} {params.calibration:q} --out {output:q} 2> {log:q}"
+
+
 rule simulate:
-    """One case's time loop: noiseless lucky frames and telemetry. A no-AO case takes its
-    LGS telemetry from the AO case that measures the same slopes (config.lgs_twin), when
-    the study has one: its own loop then only images (a third of the cost)."""
+    """One case's time loop: noiseless lucky frames and telemetry. An AO case replays the
+    slopes of its LGS chain (rule lgs_slopes); a no-AO case takes its LGS telemetry from the
+    AO case that measures the same slopes (config.lgs_twin), when the study has one: its own
+    loop then only images (a third of the cost)."""
     input:
         screens=lambda w: f"results/turbulence/{turbulence_key(TURBULENCE[w.case])}.npy",
         screens_metadata=lambda w: f"results/turbulence/{turbulence_key(TURBULENCE[w.case])}.nc",
         reconstructor=lambda w: [] if LGS_TWIN[w.case] else reconstructor_file(w.case),
         commands=lambda w: commands_file(w.case),
-        calibration=lambda w: [] if LGS_TWIN[w.case] else calibration_file(w.case),
-        # ancient: a rerun of the twin for its AO alone changes no lgs_rms; whatever does (the LGS
-        # chain's config, screens, seed, code) is this case's own params and inputs too
+        calibration=lambda w: [] if LGS_TWIN[w.case] or SLOPES[w.case] else calibration_file(w.case),
+        # ancient: a remade slopes product or a rerun of the twin for its AO alone changes no
+        # slope; whatever does (the LGS chain's config, screens, seed, code) is this case's own
+        # params and inputs too
+        slopes=lambda w: ancient(slopes_file(w.case)) if SLOPES[w.case] else [],
         lgs_twin=lambda w: ancient(f"results/cases/{LGS_TWIN[w.case]}/telemetry.nc") if LGS_TWIN[w.case] else [],
         code=step_sources("simulation"),
     output:
@@ -21,6 +52,7 @@ rule simulate:
         products=lambda w, input: ((["--reconstructor", input.reconstructor] if input.reconstructor else [])
                                    + (["--commands", input.commands] if input.commands else [])
                                    + (["--calibration", input.calibration] if input.calibration else [])
+                                   + (["--slopes", input.slopes] if input.slopes else [])
                                    + (["--lgs-telemetry", input.lgs_twin] if input.lgs_twin else [])),
     threads: 1
     priority: lambda w: simulate_priority(w.case)

@@ -38,6 +38,8 @@ from .config import (
     reconstructor_key,
     reconstructor_spec,
     sha256,
+    slopes_key,
+    slopes_spec,
     turbulence_key,
     turbulence_spec,
 )
@@ -126,7 +128,8 @@ def _cpu_model() -> str:
 
 def case_jobs(study: dict, cases: dict, case: str) -> list[str]:
     """``step/name`` of every job ``results/cases/<case>/lucky.nc`` needs from scratch: with
-    an LGS twin (``config.lgs_twin``), the twin's simulation and its products too."""
+    an LGS twin (``config.lgs_twin``), the twin's simulation and its products too (an AO
+    case's slopes: ``config.slopes_spec``)."""
     twin = lgs_twin(study, cases, case)
     simulated = [twin, case] if twin else [case]
     jobs = [f"turbulence/{turbulence_key(turbulence_spec(study, cases[case]))}"]
@@ -134,7 +137,8 @@ def case_jobs(study: dict, cases: dict, case: str) -> list[str]:
         config = cases[name]
         for step, spec, key in (("reconstructor", reconstructor_spec(config), reconstructor_key),
                                 ("calibration", calibration_spec(study, config), calibration_key),
-                                ("commands", commands_spec(config), commands_key)):
+                                ("commands", commands_spec(config), commands_key),
+                                ("slopes", slopes_spec(study, config), slopes_key)):
             if spec is not None and (job := f"{step}/{key(spec)}") not in jobs:
                 jobs.append(job)
     return jobs + [f"simulate/{name}" for name in simulated] + [f"lucky/{case}"]

@@ -141,7 +141,8 @@ class Case:
     """The beacons, or None when the case has no LGS."""
     wfs: WfsSettings
     tomography: TomographySettings
-    ao: AoSettings
+    ao: AoSettings | None
+    """None for an LGS chain alone (``config.lgs_chain_config``: no targets either)."""
     seeing: BeaconSeeing | None = None
     """The turbulence as the beacons see it at the mean r0 (the seeing the WFS calibration assumes)."""
 
@@ -156,14 +157,14 @@ class Case:
             layers=layers,
             r0=R0Schedule(atm["r0_500nm_m"], atm["r0_amplitude_m"], atm["r0_period_s"]),
             outer_scale_m=atm["outer_scale_m"],
-            targets=targets_from(case["targets_arcsec"]),
+            targets=targets_from(case.get("targets_arcsec", ())),
             time_step_s=case["time_step_s"],
             steps_per_frame=round(cam["frame_time_s"] / case["time_step_s"]),
             n_frames=frame_count(case),
             lgs=lgs_from(case["lgs"]) if case["lgs"]["enabled"] else None,
             wfs=wfs_from(case["wfs"]),
             tomography=tomography_from(case["tomography"]),
-            ao=ao_from(case["ao"]),
+            ao=ao_from(case["ao"]) if "ao" in case else None,
             seeing=seeing_from(atm, lgs_from(case["lgs"])) if case["lgs"]["enabled"] else None,
         )
 

@@ -66,7 +66,9 @@ def cmd_simulate(args) -> None:
     from .case import Case
     from .config import imaged_targets
     from .datasets import FrameWriter, open_dataset, provenance, write_dataset
+    from .lgs_slopes import RecordedSlopes
     from .simulation import lgs_chain, simulate, twin_lgs_rms_nm
+    from ..tomography.criterion import LgsRmsEstimator
     from .turbulence import read_screens
 
     config = json.loads(args.case)
@@ -75,6 +77,10 @@ def cmd_simulate(args) -> None:
     sensor = estimator = None
     if args.reconstructor:
         reconstructors = open_dataset(args.reconstructor, "reconstructor", allow_nan=())["reconstructor"].values
+    if args.slopes:  # an AO case: its LGS slopes measured by their product job
+        sensor = RecordedSlopes.open(args.slopes, config, args.seed)
+        estimator = LgsRmsEstimator(reconstructors, sensor.n_slopes)
+    elif args.reconstructor:
         calibration = (open_dataset(args.calibration, "WFS calibration", allow_nan=()) if args.calibration
                        else None)
         sensor, estimator = lgs_chain(case, screens, reconstructors, args.seed, calibration)
@@ -97,6 +103,18 @@ def cmd_simulate(args) -> None:
     telemetry.attrs.update(provenance(f"luckyao telemetry of case {args.name}", config, args.seed))
     telemetry.attrs["case"] = args.name
     write_dataset(telemetry, args.telemetry, allow_nan={"axis_strehl"} if len(imaged) < len(case.targets) else ())
+
+
+def cmd_slopes(args) -> None:
+    from .datasets import open_dataset, provenance, write_dataset
+    from .lgs_slopes import measure_lgs_slopes
+    from .turbulence import read_screens
+
+    spec = json.loads(args.spec)
+    calibration = open_dataset(args.calibration, "WFS calibration", allow_nan=()) if args.calibration else None
+    ds = measure_lgs_slopes(spec, read_screens(args.screens, args.screens_metadata), calibration)
+    ds.attrs.update(provenance("luckyao LGS slopes", spec, spec["seed"]))
+    write_dataset(ds, args.out, compress=False)
 
 
 def cmd_reconstructor(args) -> None:
@@ -266,9 +284,18 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--calibration", default="", help="WFS calibration file (cases with wfs.calibration)")
     p.add_argument("--lgs-telemetry", default="",
                    help="telemetry of the AO case that measured this no-AO case's LGS rms (config.lgs_twin)")
+    p.add_argument("--slopes", default="", help="LGS slopes product (cases with AO, config.slopes_spec)")
     p.add_argument("--frames", required=True)
     p.add_argument("--telemetry", required=True)
     p.set_defaults(func=cmd_simulate)
+
+    p = sub.add_parser("slopes", help="measure the LGS slopes of an AO case's LGS chain")
+    p.add_argument("--spec", required=True, help="slopes spec as JSON (config.slopes_spec)")
+    p.add_argument("--screens", required=True)
+    p.add_argument("--screens-metadata", required=True)
+    p.add_argument("--calibration", default="", help="WFS calibration file (cases with wfs.calibration)")
+    p.add_argument("--out", required=True)
+    p.set_defaults(func=cmd_slopes)
 
     p = sub.add_parser("reconstructor", help="build the tomographic reconstructors of a case")
     p.add_argument("--spec", required=True, help="reconstructor spec as JSON")

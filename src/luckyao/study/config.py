@@ -409,6 +409,25 @@ def lgs_spec(case: dict) -> dict | None:
     return {**spec, "frame_time_s": case["camera"]["frame_time_s"]}
 
 
+def lgs_chain_config(case: dict) -> dict:
+    """A resolved case less its AO (the LGS sensor is open loop: it never sees the DM) and its
+    targets, which its LGS slopes do not depend on; the rest makes a :class:`.case.Case`."""
+    return {key: value for key, value in case.items() if key not in ("ao", "targets_arcsec", "reference_target")}
+
+
+def slopes_spec(study: dict, case: dict) -> dict | None:
+    """Everything an AO case's LGS slopes depend on (None without AO): its LGS chain, the
+    seed and the screens; cases that differ only in their AO or targets share them."""
+    if case["ao"]["mode"] == "none":
+        return None
+    return {"seed": study["seed"], "screens": turbulence_key(turbulence_spec(study, case)),
+            "case": lgs_chain_config(case)}
+
+
+def slopes_key(spec: dict) -> str:
+    return "slopes_" + sha256(spec)[:12]
+
+
 def lgs_twin(study: dict, cases: dict, name: str) -> str | None:
     """The case whose simulation measures a no-AO case's LGS telemetry, so that its own
     simulation images the science targets only: the first AO case (by name) with the same

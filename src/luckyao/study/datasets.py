@@ -51,7 +51,8 @@ def provenance(title: str, config: dict, seed: int) -> dict:
     libraries = {"python": platform.python_version(), "numpy": np.__version__, "scipy": version("scipy"),
                  "numba": version("numba"), "pyfftw": version("pyFFTW"), "xarray": xr.__version__,
                  "netCDF4": netCDF4.__version__, "netcdf_library": netCDF4.__netcdf4libversion__,
-                 "hdf5_library": netCDF4.__hdf5libversion__}
+                 "hdf5_library": netCDF4.__hdf5libversion__,
+                 "openblas_coretype": os.environ.get("OPENBLAS_CORETYPE", "auto")}
     return {
         "Conventions": "CF-1.8",
         "title": title,

@@ -11,9 +11,11 @@ paper-fidelity run (README, Paper fidelity):
   (2 x 8 n_slopes^2), the cross covariances and results (24 bytes per point and
   slope; the command matrix's points a quarter of the DM pitch apart) and the file,
   with n_slopes = 2 x beacons x the sub-apertures in the pupil's disk;
+* slopes: ``SIMULATE_BYTES`` (the sensor's screens memory-mapped) plus the slopes it
+  holds and writes, 4 bytes per slope of every WFS exposure;
 * simulate: ``SIMULATE_BYTES`` measured (the screens are memory-mapped) plus the
-  matrices it loads and a block of frames; the frame cube it writes, 4 bytes per
-  pixel of every imaged target's frames;
+  matrices and slopes it loads and a block of frames; the frame cube it writes, 4 bytes
+  per pixel of every imaged target's frames;
 * lucky: 1.5 GB and 0.21 GB of partial sums per detector for a 256-pixel camera at paper
   fidelity (the sweep's 19 detectors, ``cog`` alone: 4.7 GB measured), the partial sums
   scaling with the camera's pixels; a sub-pixel registration method's ~1/15 of that more.
@@ -32,7 +34,7 @@ from pathlib import Path
 
 from .turbulence import TurbulenceSpec, strip_specs
 from .config import (commands_key, commands_spec, frame_count, imaged_targets, lucky_settings, reconstructor_key,
-                     reconstructor_spec, registrations, turbulence_key, turbulence_spec)
+                     reconstructor_spec, registrations, slopes_key, slopes_spec, turbulence_key, turbulence_spec)
 
 BASE_BYTES = 0.4e9
 """Python with numpy, scipy, numba and pyFFTW loaded."""
@@ -96,18 +98,29 @@ def commands_memory_bytes(spec: dict) -> float:
     return BASE_BYTES + 16.0 * n_slopes**2 + 24.0 * n_points * n_slopes + commands_bytes(spec)
 
 
+def slopes_bytes(case: dict) -> float:
+    """An AO case's LGS slopes product (float32, every WFS exposure's slopes)."""
+    n_slopes, _ = _slopes_and_points(case)
+    steps_per_frame = round(case["camera"]["frame_time_s"] / case["time_step_s"])
+    return 4.0 * n_slopes * frame_count(case) * steps_per_frame / case["wfs"]["exposure_steps"]
+
+
+def slopes_memory_bytes(case: dict) -> float:
+    return SIMULATE_BYTES + slopes_bytes(case)
+
+
 def frames_bytes(case: dict) -> float:
     """A case's frame cube (float32, its imaged targets)."""
     return 4.0 * len(imaged_targets(case)) * frame_count(case) * case["camera"]["n_pixels"] ** 2
 
 
 def simulate_memory_bytes(case: dict) -> float:
-    """A simulation: its measured own memory, the matrices it loads, a block of frames."""
+    """A simulation: its measured own memory, the matrices and slopes it loads, a block of frames."""
     matrices = 0.0
     if (spec := reconstructor_spec(case)) is not None:
         matrices += reconstructor_bytes(spec)
     if (spec := commands_spec(case)) is not None:
-        matrices += commands_bytes(spec)
+        matrices += commands_bytes(spec) + slopes_bytes(case)
     block = 3 * 4.0 * len(case["targets_arcsec"]) * FRAME_BLOCK * case["camera"]["n_pixels"] ** 2
     return SIMULATE_BYTES + matrices + block
 
@@ -149,6 +162,9 @@ def study_jobs(study: dict, cases: dict) -> list[tuple[str, float, str | None, f
             key = commands_key(spec)
             jobs[f"commands {key}"] = (commands_memory_bytes(spec), f"results/commands/{key}.nc",
                                        commands_bytes(spec))
+        if (spec := slopes_spec(study, case)) is not None:
+            key = slopes_key(spec)
+            jobs[f"slopes {key}"] = (slopes_memory_bytes(case), f"results/slopes/{key}.nc", slopes_bytes(case))
         jobs[f"simulate {name}"] = (simulate_memory_bytes(case), f"results/cases/{name}/frames.nc",
                                     frames_bytes(case))
         jobs[f"lucky {name}"] = (lucky_memory_bytes(lucky_settings(study, cases, name)), None, 0.0)

@@ -29,21 +29,17 @@ from ..tomography.criterion import LgsRmsEstimator, lucky_frame_rms_nm
 from ..tomography.reconstructor import reconstruction_points
 from ..units import ARCSEC_RAD, REFERENCE_WAVELENGTH_M, phase_rad_to_nm
 from ..wfs.sensor import LgsSensor
-from .calibration import slope_estimator
 from .case import Case
 from .config import lgs_spec
 from .datasets import open_dataset, require_finite
+from .lgs_slopes import lgs_sensor
 
 
 def lgs_chain(case: Case, screens: ScreenSet, reconstructors: np.ndarray,
               seed: int, calibration=None) -> tuple[LgsSensor, LgsRmsEstimator]:
-    """The case's LGS sensor and its estimator (``reconstructors`` (target, point, slope)),
-    its slopes calibrated by ``calibration`` (:func:`.calibration.build_calibration`)
-    when the case asks for it."""
-    wfs = case.wfs
-    sensor = LgsSensor(case.lgs, case.shack_hartmann(), wfs.exposure_steps, list(case.layers), screens, seed,
-                       wfs.photons_per_subaperture, wfs.read_noise_e)
-    sensor.estimator = slope_estimator(case, sensor.wfs, sensor.elongation, calibration)
+    """The case's LGS sensor (:func:`.lgs_slopes.lgs_sensor`) and its estimator (``reconstructors``
+    (target, point, slope))."""
+    sensor = lgs_sensor(case, screens, seed, calibration)
     return sensor, LgsRmsEstimator(reconstructors, sensor.n_slopes)
 
 
@@ -142,7 +138,7 @@ def simulate(case: Case, screens: ScreenSet, write_frames, sensor: LgsSensor | N
     """Run the case; ``write_frames(start, frames (imaged target, k, n, n))`` receives the
     noiseless unit-flux frames of ``imaged_targets`` (indices into ``case.targets``,
     default all; every target gets its truth). Returns the telemetry dataset. With an LGS
-    ``sensor`` and its ``estimator``, each frame also gets its ``lgs_rms_nm``; a case
+    ``sensor`` (or its recorded slopes, :class:`.lgs_slopes.RecordedSlopes`) and its ``estimator``, each frame also gets its ``lgs_rms_nm``; a case
     without AO may instead be given them (target, frame), as measured by a case with the
     same LGS chain (:func:`luckyao.study.config.lgs_twin`);
     with ``commands`` (the command matrix and the DM slopes of the case's
