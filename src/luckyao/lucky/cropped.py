@@ -4,7 +4,7 @@ The baseline ``cog`` adds each selected frame, whole (n x n float64), into the p
 every (criterion, bin) it belongs to (:class:`.accumulation.WholeFrames`): about 16 whole-frame
 adds per frame and detector, memory traffic that would dominate a run with every registration
 method. A sub-pixel method (:mod:`.registration`) instead adds one short vector per frame
-(float64), ``[crop, energies, flux]``:
+(float64), ``[crop, radial sums, flux]``:
 
 * ``crop``: the registered frame's central ``crop_px`` square about the axis pixel: the frame
   rolled by the whole-pixel part of its shift, cut to ``crop_px`` x ``crop_px``, then moved by
@@ -12,9 +12,11 @@ method. A sub-pixel method (:mod:`.registration`) instead adds one short vector 
   the flux it holds is conserved; the ringing of the crop's edges falls off as 1/distance and
   alternates in sign, so the core, at the centre, is moved as by the whole frame's Fourier
   shift to ~1e-4 of its peak, ``tests/test_registration.py``);
-* ``energies``: the frame's encircled energy ``EE(R)`` on :attr:`.metrics.EncircledEnergy.radii_px`
-  about its registered position, which the Fourier shift brings exactly onto the axis: the
-  whole band-limited frame's, not the crop's (:meth:`.metrics.EncircledEnergy.energies_binned`);
+* ``radial sums``: the terms of the frame's encircled energy about its registered position
+  (which the Fourier shift brings exactly onto the axis) summed over each ``|f|``
+  (:meth:`.metrics.EncircledEnergy.radial_sums_about`): the whole band-limited frame's, not the
+  crop's; their product with the kernel (:meth:`.metrics.EncircledEnergy.energies_of`) is
+  ``EE(R)`` on the d50's radii, taken once per integrated image, not per frame;
 * ``flux``: the whole frame's.
 
 All three are linear in the frame, so the sum of the vectors of a set of frames is the vector
@@ -23,7 +25,7 @@ brightest pixel over ``P_dl F`` (:func:`.metrics.strehl_from`, ``F`` the whole f
 stacked image peaks at the axis, inside the crop), FWHM from the crop
 (:func:`.metrics.fwhm_arcsec`), d50 from the energies (about the axis, where the method stacks
 the frames; ``cog``'s whole-frame d50 is about the integrated image's centre of gravity). A
-vector is ~1/15 of a 256 x 256 frame at the default crop (:data:`CROP_ARCSEC`), and a crop's
+vector is ~1/8 of a 256 x 256 frame at the default crop (:data:`CROP_ARCSEC`), and a crop's
 Fourier shift ~1/20 of a whole frame's.
 """
 
@@ -52,8 +54,8 @@ def crop_px(n_pixels: int, pixel_scale_arcsec: float) -> int:
 
 @dataclass(frozen=True, eq=False)
 class CroppedFrames:
-    """The vectors ``[crop (crop_px^2), energies (n_radii), flux]`` of frames of ``n_pixels`` square
-    (module docstring): their layout, how they are made and added, and their scores."""
+    """The vectors ``[crop (crop_px^2), radial sums (n_bins), flux]`` of frames of ``n_pixels``
+    square (module docstring): their layout, how they are made and added, and their scores."""
 
     n_pixels: int
     crop_px: int
@@ -68,7 +70,7 @@ class CroppedFrames:
     @property
     def item_shape(self) -> tuple[int]:
         """Shape of one vector."""
-        return (self.crop_px**2 + self.encircled.n_radii + 1,)
+        return (self.crop_px**2 + self.encircled.n_bins + 1,)
 
     @cached_property
     def window(self) -> np.ndarray:
@@ -76,14 +78,14 @@ class CroppedFrames:
         return axis_window(self.crop_px)
 
     def prepare(self, spectra, shifts: np.ndarray, remainder: np.ndarray, flux: np.ndarray,
-                energies: np.ndarray | None = None, which: np.ndarray | None = None,
+                radial_sums: np.ndarray | None = None, which: np.ndarray | None = None,
                 out: np.ndarray | None = None) -> np.ndarray:
         """The vectors (k, item) float64 of the frames (k, n, n) of ``spectra``
         (:class:`.registration.FrameSpectra`) registered by whole-pixel ``shifts`` (k, 2) int
         (``np.roll`` semantics) and sub-pixel ``remainder`` (k, 2) (y, x), of flux ``flux`` (k,);
-        ``energies`` (k, n_radii): their encircled energies about their registered positions,
-        where known and finite (else made here, about ``n/2 - shift``: the axis pixel for a frame
-        not registered, which is not shifted); ``which`` (k,) bool: only those frames (the
+        ``radial_sums`` (k, n_bins): their encircled energy's radial sums about their registered
+        positions, where known and finite (else made here, about ``n/2 - shift``: the axis pixel for
+        a frame not registered, which is not shifted); ``which`` (k,) bool: only those frames (the
         others' rows undefined). Into ``out`` (>= k, item) if given."""
         frames = spectra.frames
         k, n, c = len(frames), self.n_pixels, self.crop_px
@@ -100,17 +102,17 @@ class CroppedFrames:
         elif moving.any():
             crops[moving] = fourier_shift(crops[moving], remainder[moving])
         out[picked, :c * c] = crops[picked].reshape(-1, c * c)
-        energy = slice(c * c, c * c + self.encircled.n_radii)
-        known = np.zeros(k, bool) if energies is None else which & np.isfinite(energies).all(axis=1)
+        radial = slice(c * c, c * c + self.encircled.n_bins)
+        known = np.zeros(k, bool) if radial_sums is None else which & np.isfinite(radial_sums).all(axis=1)
         if known.all():
-            out[:, energy] = energies
+            out[:, radial] = radial_sums
         else:
             if known.any():
-                out[known, energy] = energies[known]
-            missing = which & ~known
-            if missing.any():
-                centres = n // 2 - (shifts + remainder)
-                out[missing, energy] = self.encircled.energies_binned(frames, centres, spectra, missing)[missing]
+                out[known, radial] = radial_sums[known]
+            missing = np.flatnonzero(which & ~known)
+            if missing.size:
+                centres = n // 2 - (shifts + remainder)[:, None]  # (k, 1, 2)
+                out[missing, radial] = self.encircled.radial_sums_about(frames, centres, spectra, missing)[:, 0]
         out[picked, -1] = flux[picked]
         return out
 
@@ -137,8 +139,9 @@ class CroppedFrames:
     def score(self, vectors: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Strehl ratio, FWHM [arcsec] and d50 [arcsec] (...) of the images of vectors (..., item)
         (module docstring)."""
-        c2, n_radii = self.crop_px**2, self.encircled.n_radii
+        c2, n_bins = self.crop_px**2, self.encircled.n_bins
         images, flux = self.images(vectors), self.flux(vectors)
         strehl = strehl_from(images.max(axis=(-2, -1)), flux, self.diffraction_limited_peak)
-        radius = self.encircled.radius_px_of(vectors[..., c2:c2 + n_radii], flux)
+        radius = self.encircled.radius_px_of(self.encircled.energies_of(vectors[..., c2:c2 + n_bins]), flux)
         return strehl, fwhm_arcsec(images, self.pixel_scale_arcsec), d50_from_radius(radius, self.pixel_scale_arcsec)
+

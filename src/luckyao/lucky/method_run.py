@@ -122,13 +122,14 @@ class MethodRun:
         return self.registration.positions_px(spectra.frames, common[1], spectra)
 
     def measures(self, spectra: FrameSpectra, common: tuple[np.ndarray, ...], registered: np.ndarray | None,
-                 energies: np.ndarray | None) -> tuple[np.ndarray, ...]:
+                 radial_sums: np.ndarray | None) -> tuple[np.ndarray, ...]:
         """Flux, centre of gravity, Strehl, d50 [pixel] (about the registered position; the centre
         of gravity with ``cog``) and registered position (:meth:`registered`) of the frames (k, n, n)
         of ``spectra`` whose flux, centre of gravity and Strehl are ``common`` (they do not depend on
-        the method), and for a sub-pixel method their encircled ``energies`` (k, n_radii) about the
-        registered positions (its d50's, and added into its sums: :class:`.cropped.CroppedFrames`);
-        with a reference, their flux only."""
+        the method), and for a sub-pixel method the ``radial_sums`` (k, n_bins) of their encircled
+        energy about the registered positions (:meth:`.metrics.EncircledEnergy.radial_sums_about`:
+        its d50's, and added into its sums, :class:`.cropped.CroppedFrames`); with a reference,
+        their flux only."""
         flux, centroids, strehl = common
         if self.frames.reference is not None:
             return (flux,)
@@ -136,8 +137,8 @@ class MethodRun:
         if not self.registration.subpixel:
             radius = encircled.radius_px_binned(spectra.frames, registered, flux=flux, spectra=spectra)
             return flux, centroids, strehl, d50_from_radius(radius, 1.0), registered
-        radius = encircled.radius_px_of(energies, flux)
-        return flux, centroids, strehl, d50_from_radius(radius, 1.0), registered, energies
+        radius = encircled.radius_px_of(encircled.energies_of(radial_sums), flux)
+        return flux, centroids, strehl, d50_from_radius(radius, 1.0), registered, radial_sums
 
     def keep_noiseless(self, clean: tuple[np.ndarray, ...]) -> None:
         """Pass 0's measures of the noiseless frames (:meth:`measures` of all frames): the guesses' predictor."""
@@ -179,8 +180,8 @@ class MethodRun:
         k = sl.stop - sl.start
         frames.record(i, sl, measures)
         shifts, add = frames.shifts[i, sl], self.accumulation.add
-        energies = measures[5] if len(measures) > 5 else None
-        prepared = self._prepared(detected, i, sl, frames.flux[i, sl], energies)
+        radial_sums = measures[5] if len(measures) > 5 else None
+        prepared = self._prepared(detected, i, sl, frames.flux[i, sl], radial_sums)
         # the early criteria and the recentred long exposure: shifts known now
         rows_early = np.concatenate([sums.run_rows(early, self.bins[i, early, sl]),
                                      np.full((k, 1), sums.long_exposure_row)], axis=1)  # (k, early + 1)
@@ -200,18 +201,18 @@ class MethodRun:
     def add_noiseless(self, sl: slice, unit: FrameSpectra) -> None:
         """Pass 1, once every detector has added its frames ``sl``: the noiseless frames (``unit``) with
         each noisy detector's shifts into that detector's noiseless sums, in the rows
-        :meth:`add_detected` gave them; a sub-pixel method measures their encircled energies about
-        every detector's registered positions at once (one reading of each frame's spectrum)."""
+        :meth:`add_detected` gave them; a sub-pixel method measures their encircled energy's radial
+        sums about every detector's registered positions at once (one reading of each spectrum)."""
         pending, self.pending_noiseless = self.pending_noiseless, []
         if not pending:
             return
-        frames, energies = self.frames, [None] * len(pending)
+        frames, radial_sums = self.frames, [None] * len(pending)
         if self.registration.subpixel:
             detectors = [i for i, _ in pending]
             centres = frames.n_pixels // 2 - (frames.shifts[detectors, sl] + frames.remainder[detectors, sl])
-            energies = self.run.encircled.energies_binned_about(unit.frames, centres.transpose(1, 0, 2), unit)
-            energies = energies.transpose(1, 0, 2)  # (detector, frame, radius)
-        for (i, rows), about in zip(pending, energies):
+            radial_sums = self.run.encircled.radial_sums_about(unit.frames, centres.transpose(1, 0, 2), unit)
+            radial_sums = radial_sums.transpose(1, 0, 2)  # (detector, frame, bin)
+        for (i, rows), about in zip(pending, radial_sums):
             self.accumulation.add(self._prepared(unit, i, sl, unit.flux(), about, slot=1), frames.shifts[i, sl], rows,
                                   self.sums.noiseless_rows[i], 1.0)
 

@@ -228,23 +228,40 @@ class EncircledEnergy:
                           weight, binned[j])
         return binned @ kernel
 
-    def energies_binned_about(self, images: np.ndarray, centres_px: np.ndarray, spectra=None) -> np.ndarray:
-        """:meth:`energies_binned` of images (k, n, n) about several centres each, ``centres_px``
-        (k, m, 2): (k, m, n_radii), each image's spectrum read once for its ``m`` centres
-        (:func:`luckyao.lucky.kernels.radial_energies`; the same sums to ~1e-14)."""
-        images = np.asarray(images)
-        fy, fx, row_end, bin_of, weight, kernel = self._radial
+    @property
+    def n_bins(self) -> int:
+        """The radial bins of the kept frequencies (the distinct ``|f|``): the length of
+        :meth:`radial_sums_about`'s sums."""
+        return self._radial[-1].shape[0]
+
+    def radial_sums_about(self, images: np.ndarray, centres_px: np.ndarray, spectra=None,
+                          which: np.ndarray | None = None) -> np.ndarray:
+        """The radial sums (k, m, n_bins) of :meth:`energies_binned` (its terms of equal ``|f|``,
+        before their product with the kernel: :meth:`energies_of`) of images (k, n, n) about several
+        centres each, ``centres_px`` (k, m, 2), each image's spectrum (from ``spectra`` if given)
+        read once for its ``m`` centres (:func:`luckyao.lucky.kernels.radial_energies`: the same
+        sums to ~1e-14); ``which`` (indices): only those images, (len(which), m, n_bins). Linear in
+        the image, as the energies: a sum of images has the sum of their radial sums."""
+        fy, fx, row_end, bin_of, weight, _ = self._radial
         frame, spectrum, fft = self._rfft2
-        centres = np.ascontiguousarray(centres_px, dtype=np.float64)
-        k, m = centres.shape[:2]
-        binned = np.empty((k, kernel.shape[0], m))
-        for j, image in enumerate(images):
+        which = np.arange(len(images)) if which is None else np.asarray(which)
+        centres = np.ascontiguousarray(np.asarray(centres_px, dtype=np.float64)[which])
+        sums = np.empty((len(which), centres.shape[1], self.n_bins))
+        binned = np.empty((self.n_bins, centres.shape[1]))
+        for out, j, about in zip(sums, which, centres):
             if spectra is None:
-                np.copyto(frame, image, casting="same_kind")
+                np.copyto(frame, images[j], casting="same_kind")
                 fft.execute()
-            radial_energies(spectrum if spectra is None else spectra.spectrum(j), centres[j], fy, fx, row_end,
-                            bin_of, weight, binned[j])
-        return (binned.transpose(0, 2, 1).reshape(k * m, -1) @ kernel).reshape(k, m, -1)
+            radial_energies(spectrum if spectra is None else spectra.spectrum(j), about, fy, fx, row_end, bin_of,
+                            weight, binned)
+            out[:] = binned.T
+        return sums
+
+    def energies_of(self, radial_sums: np.ndarray) -> np.ndarray:
+        """The encircled energies (..., n_radii) on ``radii_px`` of radial sums (..., n_bins)
+        (:meth:`radial_sums_about`, or a sum of them): their product with the kernel, float64."""
+        shape = radial_sums.shape[:-1]
+        return (radial_sums.reshape(-1, self.n_bins) @ self._radial[-1]).reshape(*shape, self.n_radii)
 
     def fractions_binned(self, images: np.ndarray, centres_px: np.ndarray,
                          flux: np.ndarray | None = None, spectra=None) -> np.ndarray:

@@ -50,10 +50,10 @@ wrong selection or recentring from the noise in the final image. The sums are fl
 throughout, frame by frame (:func:`.kernels.add_recentred`); a noiseless detector's second
 set is its first, copied, so its ``*_noiseless`` values equal the others bit for bit. The
 sub-pixel methods add, instead of whole frames, each registered frame's central crop, its
-encircled energy about the axis and its flux (:mod:`.cropped`: a fifteenth of the memory and
-its traffic), from which their integrated images are scored.
+encircled energy's radial sums about the axis and its flux (:mod:`.cropped`: an eighth of the
+memory and its traffic), from which their integrated images are scored.
 Memory: per method, the two sets of partial sums, float64 (2 x detectors x criteria x distinct
-counts x n x n; a sub-pixel method's ~1/15 of that), plus a chunk's work arrays (~1 kB per
+counts x n x n; a sub-pixel method's ~1/8 of that), plus a chunk's work arrays (~1 kB per
 pixel and frame of a chunk) and, when scoring, the integrated images (criteria x fractions x
 detectors x n x n) of one set of one method at a time (the cumulative sums are made in place).
 
@@ -256,19 +256,19 @@ class _LuckyRun:
 
     def measures(self, spectra: FrameSpectra, common: tuple[np.ndarray, ...]) -> list[tuple[np.ndarray, ...]]:
         """Every method's measures (:meth:`.MethodRun.measures`) of the frames of ``spectra`` whose
-        flux, centre of gravity and Strehl are ``common``; the sub-pixel methods' encircled
-        energies about their registered positions all from one reading of each frame's spectrum
-        (:meth:`.metrics.EncircledEnergy.energies_binned_about`)."""
+        flux, centre of gravity and Strehl are ``common``; the sub-pixel methods' radial sums about
+        their registered positions all from one reading of each frame's spectrum
+        (:meth:`.metrics.EncircledEnergy.radial_sums_about`)."""
         registered = [method.registered(spectra, common) for method in self.methods]
         about = [j for j, (method, r) in enumerate(zip(self.methods, registered))
                  if method.registration.subpixel and r is not None]
-        energies = [None] * len(self.methods)
+        radial = [None] * len(self.methods)
         if about:
             centres = np.stack([registered[j] for j in about], axis=1)  # (k, methods, 2)
-            for j, e in zip(about, self.encircled.energies_binned_about(spectra.frames, centres, spectra)
-                            .transpose(1, 0, 2)):
-                energies[j] = e
-        return [method.measures(spectra, common, r, e) for method, r, e in zip(self.methods, registered, energies)]
+            for j, sums in zip(about, self.encircled.radial_sums_about(spectra.frames, centres, spectra)
+                               .transpose(1, 0, 2)):
+                radial[j] = sums
+        return [method.measures(spectra, common, r, sums) for method, r, sums in zip(self.methods, registered, radial)]
 
     def measure_noiseless(self) -> None:
         """Pass 0 (guessing only): the noiseless frames' measures by every method, the guesses'

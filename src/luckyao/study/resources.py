@@ -18,7 +18,7 @@ paper-fidelity run (README, Paper fidelity):
   per pixel of every imaged target's frames;
 * lucky: 1.5 GB and 0.21 GB of partial sums per detector for a 256-pixel camera at paper
   fidelity (the sweep's 19 detectors, ``cog`` alone: 4.7 GB measured), the partial sums
-  scaling with the camera's pixels; a sub-pixel registration method's ~1/15 of that more.
+  scaling with the camera's pixels; a sub-pixel registration method's ~1/8 of that more.
 
 Each rule declares ``mem_mb`` from the same estimate (``mem_mb``: x ``MARGIN``, at
 least the rule's measured paper-fidelity need; lucky's estimate is its measured
@@ -125,9 +125,10 @@ def simulate_memory_bytes(case: dict) -> float:
     return SIMULATE_BYTES + matrices + block
 
 
-SUBPIXEL_SUMS_FRACTION = (64**2 + 161) / 256**2
+SUBPIXEL_SUMS_FRACTION = (64**2 + 4357 + 1) / 256**2
 """A sub-pixel method's partial sums over a whole frame's (:mod:`luckyao.lucky.cropped`: a 1.25"
-crop, 160 encircled energies and the flux per frame, for the 5" camera at any diameter)."""
+crop, the encircled energy's 4,357 radial sums and the flux per frame, for the 4.2 m camera's
+5"; at 8.2 m the radial sums are a smaller part)."""
 
 
 def lucky_memory_bytes(settings: dict) -> float:
