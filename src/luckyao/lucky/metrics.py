@@ -199,8 +199,7 @@ class EncircledEnergy:
         spectrum = pyfftw.empty_aligned((n, n // 2 + 1), dtype=np.complex64)
         return frame, spectrum, pyfftw.FFTW(frame, spectrum, axes=(0, 1), flags=("FFTW_ESTIMATE",), threads=1)
 
-    def energies_binned(self, images: np.ndarray, centres_px: np.ndarray, spectra=None,
-                        which: np.ndarray | None = None) -> np.ndarray:
+    def energies_binned(self, images: np.ndarray, centres_px: np.ndarray, spectra=None) -> np.ndarray:
         """The encircled energies ``EE(R)`` (k, n_radii) on ``radii_px`` of images (k, n, n) about
         ``centres_px`` (k, 2) (not divided by the flux: linear in the image, so a sum of images
         has the sum of their energies), summed otherwise than :meth:`fractions`: the terms of
@@ -209,7 +208,7 @@ class EncircledEnergy:
         operations. The spectra are FFTW's (float32, one frame at a time: :attr:`_rfft2`), not
         scipy's as in :meth:`fractions`: the same transform to float32 rounding. ``spectra``: the
         images' spectra if known (:class:`.registration.FrameSpectra`, the same FFTW transform),
-        else made here. ``which`` (k,) bool: only those images' energies (the others' rows 0)."""
+        else made here."""
         images = np.asarray(images)
         n = self.n_pixels
         if images.ndim != 3 or images.shape[1:] != (n, n):
@@ -217,16 +216,14 @@ class EncircledEnergy:
         fy, fx, row_end, bin_of, weight, kernel = self._radial
         centres = np.asarray(centres_px, dtype=np.float64).reshape(-1, 2)
         frame, spectrum, fft = self._rfft2
-        binned = np.zeros((len(images), kernel.shape[0]))
+        binned = np.empty((len(images), kernel.shape[0]))
         for j, image in enumerate(images):
-            if which is not None and not which[j]:
-                continue
             if spectra is None:
                 np.copyto(frame, image, casting="same_kind")
                 fft.execute()
             radial_energy(spectrum if spectra is None else spectra.spectrum(j), centres[j], fy, fx, row_end, bin_of,
                           weight, binned[j])
-        return binned @ kernel
+        return self.energies_of(binned)
 
     @property
     def n_bins(self) -> int:
