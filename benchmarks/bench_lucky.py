@@ -48,7 +48,7 @@ from luckyao.lucky import method_run  # noqa: E402
 from luckyao.lucky.detector import Detector  # noqa: E402
 from luckyao.lucky.pipeline import run_lucky_methods  # noqa: E402
 from luckyao.lucky.ranking import ExternalCriterion  # noqa: E402
-from luckyao.lucky.registration import REGISTRATIONS, Registration  # noqa: E402
+from luckyao.lucky.registration import REGISTRATIONS, Registration, search_px  # noqa: E402
 from luckyao.optics.imaging import Camera, Imager  # noqa: E402
 from luckyao.optics.pupil import Telescope  # noqa: E402
 
@@ -144,7 +144,8 @@ method_run.score_partial_sums = _timed_score
 def registration(name: str) -> Registration:
     """The registration method ``name`` for the benchmark's camera (as ``LuckySettings.registration_methods``)."""
     im = imager()
-    return Registration(name, im.diffraction_limited, 800e-9 / 4.2 / im.camera.pixel_scale_rad)
+    return Registration(name, im.diffraction_limited, 800e-9 / 4.2 / im.camera.pixel_scale_rad,
+                        search_px(im.camera.n_pixels, im.camera.pixel_scale_arcsec))
 
 
 def run(frames: np.ndarray, n_frames: int, n_blocks: int = 0, methods=("cog",)) -> float:

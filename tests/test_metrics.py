@@ -208,6 +208,28 @@ def test_binned_encircled_energy_is_the_same_sum():
     np.testing.assert_allclose(ee.radius_px_binned(images, centroid_px(images)), ee.radius_px(images), rtol=1e-5)
 
 
+def test_radial_sums_about_several_centres_give_each_centres_encircled_energy():
+    """radial_sums_about reads each image's spectrum once for several centres, its phases by
+    recurrence: the energies of its sums (energies_of) are those energies_binned gives about each
+    centre (to 1e-12 of the largest), whose fractions are fractions' (float32 rounding); the radial
+    sums of a sum of images are the sum of theirs."""
+    ee = EncircledEnergy(64)
+    rng = np.random.default_rng(6)
+    images = gaussian_images(64, np.array([[32.0, 32.0], [30.37, 33.81], [34.5, 29.5]]), 1.7)
+    centres = rng.uniform(24, 40, (3, 5, 2))  # 5 centres per image
+    about = ee.energies_of(ee.radial_sums_about(images, centres))
+    for m in range(5):
+        one = ee.energies_binned(images, centres[:, m])
+        np.testing.assert_allclose(about[:, m], one, rtol=0, atol=1e-12 * np.abs(one).max())
+        np.testing.assert_allclose(ee.fractions_of(one, images.sum(axis=(1, 2), dtype=np.float64)),
+                                   ee.fractions(images, centres[:, m]), atol=2e-5)
+    same_centre = np.repeat(centres[:1, :1], 3, axis=0)
+    summed = ee.radial_sums_about(images.sum(axis=0, keepdims=True), same_centre[:1])
+    each = ee.radial_sums_about(images, same_centre)[:, 0].sum(axis=0)
+    np.testing.assert_allclose(summed[0, 0], each, rtol=0, atol=1e-6 * np.abs(each).max())  # float32 FFTs
+    np.testing.assert_array_equal(ee.radial_sums_about(images, centres, which=[2]), ee.radial_sums_about(images, centres)[2:])
+
+
 @pytest.mark.parametrize("shape, up", [((32, 32), 4), ((33, 31), 3), ((16, 21), 5), ((64, 48), 16), ((7, 8), 2)])
 def test_interpolant_patch_is_the_matrix_fourier_transform(shape, up):
     """The Dirichlet-kernel form of the trigonometric interpolant (two real products, the

@@ -12,6 +12,8 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from . import kernels
+from .metrics import EncircledEnergy, score_images
 from .ranking import criterion_bins, fraction_counts, last_bins
 
 
@@ -93,7 +95,8 @@ class TimeBlocks:
 class PartialSums:
     """Every partial sum of a run: the rows of two float64 arrays, per detector.
 
-    ``detected`` (detector, rows, n, n), the detected frames; its rows, in order:
+    ``detected`` (detector, rows, *item), the detected frames (an item: a whole frame, or a
+    sub-pixel method's vector, :mod:`.cropped`); its rows, in order:
 
     * the run's (criterion, bin) sums, row ``c n_bins + b`` (:meth:`run_rows`);
     * the recentred long exposure (all frames), row ``long_exposure_row``;
@@ -105,8 +108,8 @@ class PartialSums:
       for every block, after the sets: their sums may be corrected until the last chunk
       (frames moved between bins, :class:`.guesses.GuessedBins`).
 
-    ``noiseless`` (detector, run rows, n, n): the run's (criterion, bin) sums of the same
-    selection and shifts applied to the noiseless frames. The images are ``n^2 + 8`` apart
+    ``noiseless`` (detector, run rows, *item): the run's (criterion, bin) sums of the same
+    selection and shifts applied to the noiseless frames. The items are their size + 8 apart
     in memory (not a power of two: no cache-set conflicts); :meth:`allocate` makes them when
     the first chunk gives the frame size and the largest chunk.
     """
@@ -129,18 +132,19 @@ class PartialSums:
         self.n_sets = self.max_chunk = 0
         self.detected = self.noiseless = self.detected_rows = self.noiseless_rows = None
 
-    def allocate(self, n_pixels: int, chunk_frames: int) -> None:
-        """Zeroed sums of ``n_pixels`` square images, for chunks of up to ``chunk_frames`` frames."""
-        blocks, n = self.blocks, n_pixels
+    def allocate(self, item_shape: tuple[int, ...], chunk_frames: int) -> None:
+        """Zeroed sums of items of ``item_shape`` (a whole frame's (n, n), or a vector's,
+        :class:`.cropped.CroppedFrames`), for chunks of up to ``chunk_frames`` frames."""
+        blocks, size = self.blocks, int(np.prod(item_shape))
         if blocks.n_blocks:
             self.max_chunk = chunk_frames
             self.n_sets = min(blocks.n_blocks, -(-chunk_frames // blocks.block_frames) + 1)
         n_block_rows = (self.n_sets * self.n_stream + blocks.n_blocks * self.n_resident) * blocks.n_bins
         n_rows = self.block_row0 + n_block_rows
-        self.detected_rows = np.zeros((self.n_det, n_rows, n * n + 8))
-        self.noiseless_rows = np.zeros((self.n_det, self.long_exposure_row, n * n + 8))
-        self.detected = self.detected_rows[..., :n * n].reshape(self.n_det, n_rows, n, n)
-        self.noiseless = self.noiseless_rows[..., :n * n].reshape(self.n_det, self.long_exposure_row, n, n)
+        self.detected_rows = np.zeros((self.n_det, n_rows, size + 8))
+        self.noiseless_rows = np.zeros((self.n_det, self.long_exposure_row, size + 8))
+        self.detected = self.detected_rows[..., :size].reshape(self.n_det, n_rows, *item_shape)
+        self.noiseless = self.noiseless_rows[..., :size].reshape(self.n_det, self.long_exposure_row, *item_shape)
 
     def run_rows(self, crits, bins: np.ndarray) -> np.ndarray:
         """Rows (k, len(crits)) of frames in run bins ``bins`` (len(crits), k) (-1: none)."""
@@ -169,7 +173,7 @@ class PartialSums:
         return np.where(bins >= 0, self.block_first_row(block, crits[None, :]) + bins, -1)
 
     def completed_blocks(self, sl: slice, crits):
-        """(block, its rows of criteria ``crits`` (contiguous) (detector, rows, n, n)) of every
+        """(block, its rows of criteria ``crits`` (contiguous) (detector, rows, *item)) of every
         block the chunk ``sl`` completes; each set of rows is cleared once the caller has it."""
         if not crits:
             return
@@ -178,3 +182,39 @@ class PartialSums:
             rows = self.detected[:, first:first + len(crits) * self.blocks.n_bins]
             yield block, rows
             rows[:] = 0.0
+
+
+class WholeFrames:
+    """The baseline's accumulation (``cog``): each frame added whole (n x n), rolled by its
+    whole-pixel shift (:func:`.kernels.add_recentred`); its integrated images scored whole
+    (:func:`.metrics.score_images`). The same interface as :class:`.cropped.CroppedFrames`."""
+
+    def __init__(self, n_pixels: int, encircled: EncircledEnergy, diffraction_limited_peak: float,
+                 pixel_scale_arcsec: float):
+        self.item_shape = (n_pixels, n_pixels)
+        self.window = axis_window(n_pixels)
+        self.encircled, self.peak, self.scale = encircled, diffraction_limited_peak, pixel_scale_arcsec
+
+    @staticmethod
+    def prepare(spectra, shifts, remainder, flux, energies=None, which=None, out=None) -> np.ndarray:
+        """The frames (k, n, n) float32 of ``spectra`` as they are (rolled when added)."""
+        return spectra.frames
+
+    @staticmethod
+    def add(prepared: np.ndarray, shifts: np.ndarray, rows: np.ndarray, partial: np.ndarray, sign: float) -> None:
+        kernels.add_recentred(prepared, shifts, rows, partial, sign)
+
+    def window_values(self, prepared: np.ndarray, shifts: np.ndarray, out: np.ndarray) -> None:
+        window_values(prepared, shifts, self.window, out)
+
+    @staticmethod
+    def images(items: np.ndarray) -> np.ndarray:
+        return items
+
+    @staticmethod
+    def flux(items: np.ndarray) -> np.ndarray:
+        return items.sum(axis=(-2, -1))
+
+    def score(self, images: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Strehl ratio, FWHM [arcsec] and d50 [arcsec] (about the centre of gravity) of images (..., n, n)."""
+        return score_images(images, self.peak, self.scale, self.encircled)

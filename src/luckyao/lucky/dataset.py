@@ -118,20 +118,34 @@ def add_registration(ds: xr.Dataset, name: str, registered_px: np.ndarray, unreg
         "1", f"frames registration {name} could not register (no flux or no peak): not shifted, NaN position"))
 
 
-def add_images(ds: xr.Dataset, images: np.ndarray, long_images: np.ndarray, image_crop_px: int | None) -> xr.Dataset:
-    """``ds`` with the central ``image_crop_px`` square (None: whole) of the integrated images
-    (criterion, fraction, detector, n, n) and the long exposures (recentring, detector, n, n),
-    each over the whole frame's flux (float32): a crop sums to the fraction of the flux it holds."""
+def _over_flux(images: np.ndarray, crop_px: int, flux: np.ndarray | None) -> np.ndarray:
+    """The central ``crop_px`` square of images (..., n, n) over their whole frame's flux (...)
+    (default: their sums; elementwise, as cropping after dividing)."""
     with np.errstate(invalid="ignore", divide="ignore"):
-        # the crop of the image over its flux (elementwise: as cropping after dividing)
-        unit = crop(images, image_crop_px) / images.sum(axis=(-2, -1), keepdims=True)
-        unit_long = crop(long_images, image_crop_px) / long_images.sum(axis=(-2, -1), keepdims=True)
-    m = unit.shape[-1]
+        total = images.sum(axis=(-2, -1), keepdims=True) if flux is None else np.asarray(flux)[..., None, None]
+        return crop(images, crop_px) / total
+
+
+def add_images(ds: xr.Dataset, images: np.ndarray, long_images, image_crop_px: int | None,
+               flux: np.ndarray | None = None, long_flux=None) -> xr.Dataset:
+    """``ds`` with the central ``image_crop_px`` square (None: whole) of the integrated images
+    (criterion, fraction, detector, n, n) and the long exposures (recentring, detector, n, n) (or a
+    sequence of (detector, n_r, n_r) per recentring), each over its whole frame's flux ``flux``
+    (criterion, fraction, detector) and ``long_flux`` (a sequence of (detector,) or None per
+    recentring; default: the images' sums) (float32): a crop sums to the fraction of the flux it
+    holds. The crop is at most the smallest image given (a sub-pixel method's crop,
+    :mod:`.cropped`)."""
+    long_flux = [None] * len(long_images) if long_flux is None else long_flux
+    size = min([images.shape[-1]] + [image.shape[-1] for image in long_images])
+    m = size if image_crop_px is None else min(image_crop_px, size)
+    unit = _over_flux(images, m, flux)
+    unit_long = np.stack([_over_flux(image, m, f) for image, f in zip(long_images, long_flux)])
     offsets = np.arange(m) - m // 2
     ds = ds.assign_coords(
         y=("y", offsets, _attrs("pixel", "row offset from the optical axis pixel (n/2)")),
         x=("x", offsets, _attrs("pixel", "column offset from the optical axis pixel (n/2)")))
-    held = f"the central {m} x {m} pixels of the whole frame" if m < images.shape[-1] else "the whole frame"
+    n = long_images[0].shape[-1]  # the long exposure without recentring: always the whole frame
+    held = f"the central {m} x {m} pixels of the whole frame" if m < n else "the whole frame"
     ds["image"] = (("criterion", "fraction", "detector", "y", "x"), unit.astype(np.float32), _attrs(
         "1", f"integrated image over the whole frame's flux: {held} (their sum is the fraction of the flux "
              "they hold)"))

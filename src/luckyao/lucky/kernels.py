@@ -405,6 +405,66 @@ def add_recentred(frames, shifts, rows, partial, sign):  # pragma: no cover (jit
 
 
 @numba.njit(cache=True, nogil=True)
+def crop_rolled(frames, shifts, which, out):  # pragma: no cover (jit)
+    """``out[j]`` (c, c) = the central ``c`` square (rows and columns ``n/2 - c/2 ..``) of
+    ``roll(frames[j], shifts[j])`` (``np.roll`` semantics), for every ``j`` with ``which[j]``;
+    ``frames`` (k, n, n), ``shifts`` (k, 2) int64 (y, x), ``out`` (>= k, c, c)."""
+    k, n, _ = frames.shape
+    c = out.shape[1]
+    lo = n // 2 - c // 2
+    for j in range(k):
+        if not which[j]:
+            continue
+        x0 = (lo - shifts[j, 1]) % n
+        first = min(c, n - x0)  # columns before the source row wraps
+        for y in range(c):
+            src = frames[j, (lo + y - shifts[j, 0]) % n]
+            dst = out[j, y]
+            for x in range(first):
+                dst[x] = src[x0 + x]
+            for x in range(first, c):
+                dst[x] = src[x - first]
+
+
+@numba.njit(cache=True, nogil=True)
+def phase_ramps(spectra, shifts):  # pragma: no cover (jit)
+    """``spectra[j] *= exp(-2 pi i fy s_y) exp(-2 pi i fx s_x)`` (complex64) for the real FFTs
+    ``spectra`` (k, n, n/2 + 1) of n x n frames (frequencies ``fy`` numpy's ``fftfreq(n)``, ``fx``
+    its ``rfftfreq(n)``, cycles/pixel) and shifts ``shifts`` (k, 2) (y, x) [pixel]: the frames
+    moved by ``s`` (the Fourier shift theorem)."""
+    k, n, h = spectra.shape
+    ramp_y = np.empty(n, np.complex64)
+    ramp_x = np.empty(h, np.complex64)
+    for j in range(k):
+        for y in range(n):
+            a = -2 * np.pi * (y if y < (n + 1) // 2 else y - n) / n * shifts[j, 0]
+            ramp_y[y] = np.complex64(complex(math.cos(a), math.sin(a)))
+        for x in range(h):
+            a = -2 * np.pi * x / n * shifts[j, 1]
+            ramp_x[x] = np.complex64(complex(math.cos(a), math.sin(a)))
+        for y in range(n):
+            row = spectra[j, y]
+            for x in range(h):
+                row[x] = row[x] * ramp_y[y] * ramp_x[x]
+
+
+@numba.njit(cache=True, nogil=True)
+def add_rows(vectors, rows, partial, sign):  # pragma: no cover (jit)
+    """``partial[r, :m] += sign vectors[j]`` (float64) for every ``r = rows[j, c] >= 0``;
+    ``vectors`` (k, m) float64, ``rows`` (k, c) int64, ``partial`` (R, >= m) float64."""
+    k, m = vectors.shape
+    for j in range(k):
+        v = vectors[j]
+        for c in range(rows.shape[1]):
+            r = rows[j, c]
+            if r < 0:
+                continue
+            to = partial[r]
+            for x in range(m):
+                to[x] += sign * v[x]
+
+
+@numba.njit(cache=True, nogil=True)
 def add_frames(frames, total):  # pragma: no cover (jit)
     """``total += sum_j frames[j]`` (float64) of frames (k, n, n) float32."""
     k, n, _ = frames.shape
@@ -430,14 +490,63 @@ def radial_energy(spectrum, centre, fy, fx, row_end, bin_of, weight, out):  # pr
         a = 2 * np.pi * centre[1] * fx[x]
         px_re[x] = math.cos(a)
         px_im[x] = math.sin(a)
+    term = np.empty(m)
     for y in range(spectrum.shape[0]):
         a = 2 * np.pi * centre[0] * fy[y]
         cy, sy = math.cos(a), math.sin(a)
-        for x in range(row_end[y]):
-            z = spectrum[y, x]
+        end, row, w, bins = row_end[y], spectrum[y], weight[y], bin_of[y]
+        for x in range(end):  # a row's terms first (vectorised), then added to their bins in order
+            z = row[x]
             pr = cy * px_re[x] - sy * px_im[x]
             pi = cy * px_im[x] + sy * px_re[x]
-            out[bin_of[y, x]] += weight[y, x] * (z.real * pr - z.imag * pi)
+            term[x] = w[x] * (z.real * pr - z.imag * pi)
+        for x in range(end):
+            out[bins[x]] += term[x]
+
+
+@numba.njit(cache=True, nogil=True, fastmath={"contract"})
+def radial_energies(spectrum, centres, fy, fx, row_end, bin_of, weight, out):  # pragma: no cover (jit)
+    """:func:`radial_energy` about several centres ``centres`` (m, 2) at once, ``out`` (bins, m):
+    each frequency's value, bin and weight read once for every centre, the centres' sums
+    vectorised. The phases ``exp(2 pi i f c)`` along each axis follow the recurrence
+    ``p(f + 1/n) = p(f) exp(2 pi i c / n)`` from values computed directly wherever the frequency
+    does not step by 1/n (the zero and the Nyquist frequency), so that there are no trigonometric
+    functions per frequency and centre; the rounding this adds, ~1e-14 of the spectrum, is far
+    below the float32 spectrum's own."""
+    n_centres = centres.shape[0]
+    out[:] = 0.0
+    px_re = np.empty((fx.size, n_centres))
+    px_im = np.empty((fx.size, n_centres))
+    _phases(fx, centres[:, 1], px_re, px_im)
+    py_re = np.empty((fy.size, n_centres))
+    py_im = np.empty((fy.size, n_centres))
+    _phases(fy, centres[:, 0], py_re, py_im)
+    for y in range(spectrum.shape[0]):
+        cy, sy = py_re[y], py_im[y]
+        for x in range(row_end[y]):
+            z = spectrum[y, x]
+            zr, zi, w = z.real, z.imag, weight[y, x]
+            to, re, im = out[bin_of[y, x]], px_re[x], px_im[x]
+            for c in range(n_centres):
+                pr = cy[c] * re[c] - sy[c] * im[c]
+                pi = cy[c] * im[c] + sy[c] * re[c]
+                to[c] += w * (zr * pr - zi * pi)
+
+
+@numba.njit(cache=True, nogil=True)
+def _phases(f, c, re, im):  # pragma: no cover (jit)
+    """``re[k, j] + i im[k, j] = exp(2 pi i f[k] c[j])`` for frequencies ``f`` [cycles/pixel] spaced
+    by 1/n but where they wrap (:func:`radial_energies`): each step a multiplication."""
+    n = f.size if f[-1] < 0 else 2 * (f.size - 1)  # fftfreq(n) or rfftfreq(n)
+    for j in range(c.size):
+        step_re, step_im = math.cos(2 * np.pi * c[j] / n), math.sin(2 * np.pi * c[j] / n)
+        for k in range(f.size):
+            if k == 0 or abs(f[k] - f[k - 1] - 1.0 / n) > 0.25 / n:
+                a = 2 * np.pi * c[j] * f[k]
+                re[k, j], im[k, j] = math.cos(a), math.sin(a)
+            else:
+                r, i = re[k - 1, j], im[k - 1, j]
+                re[k, j], im[k, j] = r * step_re - i * step_im, r * step_im + i * step_re
 
 
 @numba.njit(cache=True, nogil=True)

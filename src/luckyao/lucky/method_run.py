@@ -4,9 +4,11 @@ The passes over the frames (reading them, drawing each detector's noise) are sha
 registration methods of a run; what depends on the method is here, one :class:`MethodRun`
 per method: the frames' registered positions and shifts, their d50 (about the registered
 position), the image criteria's values and bins (ranked, or guessed in pass 1), the time
-blocks, and the partial sums of the detected and of the noiseless frames. Each method's
-sums receive exactly the operations, in the same order, that a run of that method alone
-gives them, so its results are bit for bit those of a run of its own.
+blocks, and the partial sums of the detected and of the noiseless frames: of whole frames for
+``cog`` (:class:`.accumulation.WholeFrames`), of cropped vectors for the sub-pixel methods
+(:class:`.cropped.CroppedFrames`). Each method's sums receive exactly the operations, in the
+same order, that a run of that method alone gives them, so its results are bit for bit those
+of a run of its own.
 """
 
 from collections.abc import Sequence
@@ -14,8 +16,8 @@ from collections.abc import Sequence
 import numpy as np
 import xarray as xr
 
-from . import kernels
-from .accumulation import PartialSums, TimeBlocks, axis_window, recentring_shifts_px, window_values
+from .accumulation import PartialSums, TimeBlocks, WholeFrames, recentring_shifts_px
+from .cropped import CroppedFrames, crop_px
 from .dataset import (add_block_scores, add_images, add_noiseless_scores, add_recentred_strehl, add_registration,
                       result_dataset)
 from .detector import Detector
@@ -38,14 +40,13 @@ class FrameValues:
         self.registered = np.full((n_det, n_frames, 2), np.nan)
         self.flux = np.full((n_det, n_frames), np.nan)
         self.reference, self.registration = reference, registration
-        self.shifts = self.remainder = self.window = self.in_window = self.buffer = None
+        self.shifts = self.remainder = self.in_window = None
         self.n_pixels = 0
 
-    def allocate(self, n_pixels: int) -> None:
+    def allocate(self, n_pixels: int, window_size: int) -> None:
         n_det, n_frames = self.flux.shape
         self.n_pixels = n_pixels
-        self.window = axis_window(n_pixels)  # 7 x 7 pixels around the axis
-        self.in_window = np.empty((n_det, n_frames, self.window.size), dtype=np.float32)
+        self.in_window = np.empty((n_det, n_frames, window_size), dtype=np.float32)
         self.remainder = np.zeros((n_det, n_frames, 2))
         if self.reference is not None:
             self.registered[:] = self.reference.centroid_px
@@ -61,32 +62,12 @@ class FrameValues:
         (:meth:`MethodRun.measures`) and shifts."""
         self.flux[i, sl] = measures[0]
         if self.reference is None:
-            centroids, self.strehl[i, sl], self.d50_px[i, sl], registered = measures[1:]
+            centroids, self.strehl[i, sl], self.d50_px[i, sl], registered = measures[1:5]
             self.centroid[i, sl], self.registered[i, sl] = centroids, registered
             if self.registration.subpixel:
                 self.shifts[i, sl], self.remainder[i, sl] = shifts_of(registered, self.n_pixels, True)
             else:
                 self.shifts[i, sl] = recentring_shifts_px(centroids, self.n_pixels)
-
-    def shifted(self, spectra: FrameSpectra, i: int, sl: slice, which: np.ndarray | None = None,
-                slot: int = 0) -> np.ndarray:
-        """Frames ``sl`` of detector ``i`` (k, n, n) (held by ``spectra``, :class:`.registration.FrameSpectra`)
-        shifted by their sub-pixel remainders (:func:`.registration.fourier_shift`; the frames
-        themselves when every remainder is 0), those of ``which`` (k,) bool only (the others' values
-        undefined), in buffer ``slot`` (0 or 1: valid until that slot's next use)."""
-        frames = spectra.frames
-        remainder = self.remainder[i, sl]
-        moving = np.any(remainder != 0, axis=1)
-        if which is not None:
-            moving &= which
-        if not moving.any():
-            return frames
-        k = len(frames)
-        if self.buffer is None or self.buffer.shape[1] < k:
-            self.buffer = np.empty((2, *frames.shape), np.float32)
-        out = self.buffer[slot, :k]
-        out[~moving] = frames[~moving]
-        return spectra.shifted(np.flatnonzero(moving), remainder[moving], out)
 
     def unregistered(self) -> np.ndarray:
         """Frames (per detector) not registered (no position, no shift): no flux, or no peak."""
@@ -120,7 +101,8 @@ class MethodRun:
         self.blocks = TimeBlocks(n_frames, run.n_blocks, run.fractions, n_det, n_crit)
         self.sums = PartialSums(n_det, n_crit, run.counts, self.blocks, resident=self.late if self.guessing else ())
         self.frames = FrameValues(n_det, n_frames, reference, registration)
-        self.clean = self.guessed = None
+        self.clean = self.guessed = self.accumulation = self.buffer = None
+        self.pending_noiseless = []  # (noisy detector, its rows (k, m)) of the chunk's noiseless frames, to add
         self.drawn_again = np.zeros(n_det, dtype=np.int64)
 
     def assign(self, crits) -> None:
@@ -131,19 +113,32 @@ class MethodRun:
                 self.bins[i, c] = criterion_bins(self.values[c, i], larger[c], counts)
         self.blocks.assign(self.values, larger, crits)
 
-    def measures(self, spectra: FrameSpectra, common: tuple[np.ndarray, ...]) -> tuple[np.ndarray, ...]:
+    def registered(self, spectra: FrameSpectra, common: tuple[np.ndarray, ...]) -> np.ndarray | None:
+        """The registered positions (k, 2) of the frames (k, n, n) of ``spectra`` whose flux, centre
+        of gravity and Strehl are ``common`` (:meth:`.pipeline._LuckyRun.common_measures`); None
+        with a reference (its positions are the reference's)."""
+        if self.frames.reference is not None:
+            return None
+        return self.registration.positions_px(spectra.frames, common[1], spectra)
+
+    def measures(self, spectra: FrameSpectra, common: tuple[np.ndarray, ...], registered: np.ndarray | None,
+                 radial_sums: np.ndarray | None) -> tuple[np.ndarray, ...]:
         """Flux, centre of gravity, Strehl, d50 [pixel] (about the registered position; the centre
-        of gravity with ``cog``) and registered position of the frames (k, n, n) of ``spectra``
-        whose flux, centre of gravity and Strehl are ``common``
-        (:meth:`.pipeline._LuckyRun.common_measures`: they do not depend on the method); with a
-        reference, their flux only."""
+        of gravity with ``cog``) and registered position (:meth:`registered`) of the frames (k, n, n)
+        of ``spectra`` whose flux, centre of gravity and Strehl are ``common`` (they do not depend on
+        the method), and for a sub-pixel method the ``radial_sums`` (k, n_bins) of their encircled
+        energy about the registered positions (:meth:`.metrics.EncircledEnergy.radial_sums_about`:
+        its d50's, and added into its sums, :class:`.cropped.CroppedFrames`); with a reference,
+        their flux only."""
         flux, centroids, strehl = common
         if self.frames.reference is not None:
             return (flux,)
-        frames = spectra.frames
-        registered = self.registration.positions_px(frames, centroids, spectra)
-        radius = self.run.encircled.radius_px_binned(frames, registered, flux=flux, spectra=spectra)
-        return flux, centroids, strehl, d50_from_radius(radius, 1.0), registered
+        encircled = self.run.encircled
+        if not self.registration.subpixel:
+            radius = encircled.radius_px_binned(spectra.frames, registered, flux=flux, spectra=spectra)
+            return flux, centroids, strehl, d50_from_radius(radius, 1.0), registered
+        radius = encircled.radius_px_of(encircled.energies_of(radial_sums), flux)
+        return flux, centroids, strehl, d50_from_radius(radius, 1.0), registered, radial_sums
 
     def keep_noiseless(self, clean: tuple[np.ndarray, ...]) -> None:
         """Pass 0's measures of the noiseless frames (:meth:`measures` of all frames): the guesses' predictor."""
@@ -153,21 +148,40 @@ class MethodRun:
             0: (clean[2], larger[0]), 1: (clean[3], larger[1])})
 
     def allocate(self, n_pixels: int, chunk_frames: int) -> None:
-        """The partial sums and per-frame arrays, once the first chunk gives their sizes."""
-        self.sums.allocate(n_pixels, chunk_frames)
-        self.frames.allocate(n_pixels)
+        """The accumulation (whole frames for ``cog``, cropped for a sub-pixel method), the partial
+        sums and the per-frame arrays, once the first chunk gives their sizes."""
+        run = self.run
+        if self.registration.subpixel:
+            size = run.crop_px if run.crop_px is not None else crop_px(n_pixels, run.scale)
+            self.accumulation = CroppedFrames(n_pixels, size, run.encircled, run.peak, run.scale)
+        else:
+            self.accumulation = WholeFrames(n_pixels, run.encircled, run.peak, run.scale)
+        self.sums.allocate(self.accumulation.item_shape, chunk_frames)
+        self.frames.allocate(n_pixels, self.accumulation.window.size)
+        if self.registration.subpixel:
+            self.buffer = np.empty((2, chunk_frames, *self.accumulation.item_shape))
 
-    def add_detected(self, i: int, detector: Detector, sl: slice, detected: FrameSpectra, unit: FrameSpectra,
+    def _prepared(self, spectra: FrameSpectra, i: int, sl: slice, flux: np.ndarray, energies=None, which=None,
+                  slot: int = 0) -> np.ndarray:
+        """Detector ``i``'s frames ``sl`` (held by ``spectra``, of flux ``flux``) ready to add
+        (:meth:`.accumulation.WholeFrames.prepare`, :meth:`.cropped.CroppedFrames.prepare`), those of
+        ``which`` (k,) bool only; in buffer ``slot`` (0 or 1: valid until that slot's next use)."""
+        frames = self.frames
+        return self.accumulation.prepare(spectra, frames.shifts[i, sl], frames.remainder[i, sl], flux, energies,
+                                         which, None if self.buffer is None else self.buffer[slot])
+
+    def add_detected(self, i: int, detector: Detector, sl: slice, detected: FrameSpectra,
                      measures: Sequence[np.ndarray]) -> None:
-        """Pass 1, detector ``i``'s frames ``sl`` (``detected``, and the noiseless ones ``unit``: their
-        :class:`.registration.FrameSpectra`): their measures recorded, the frames recentred into the
-        sums of the criteria binned early, the recentred long exposure and, for a noisy detector,
-        the guessed bins of the late criteria."""
+        """Pass 1, detector ``i``'s frames ``sl`` (``detected``: their :class:`.registration.FrameSpectra`):
+        their measures recorded, the frames recentred into the sums of the criteria binned early, the
+        recentred long exposure and, for a noisy detector, the guessed bins of the late criteria (and
+        the same rows noted for the noiseless frames, :meth:`add_noiseless`)."""
         sums, early, late, guessed, frames = self.sums, self.early, self.late, self.guessed, self.frames
         k = sl.stop - sl.start
         frames.record(i, sl, measures)
-        shifts = frames.shifts[i, sl]
-        detected = frames.shifted(detected, i, sl)  # the sub-pixel part of the shifts
+        shifts, add = frames.shifts[i, sl], self.accumulation.add
+        radial_sums = measures[5] if len(measures) > 5 else None
+        prepared = self._prepared(detected, i, sl, frames.flux[i, sl], radial_sums)
         # the early criteria and the recentred long exposure: shifts known now
         rows_early = np.concatenate([sums.run_rows(early, self.bins[i, early, sl]),
                                      np.full((k, 1), sums.long_exposure_row)], axis=1)  # (k, early + 1)
@@ -178,12 +192,29 @@ class MethodRun:
                 guessed.guess(i, c, sl, per_frame, self.run.larger[c])
             rows_guessed = sums.run_rows(late, guessed.run[i, late, sl])
             rows_guessed_block = sums.block_rows(late, sl, guessed.block[i, late, sl])
-        kernels.add_recentred(detected, shifts, np.concatenate(
-            [rows_early, rows_block, rows_guessed, rows_guessed_block], axis=1), sums.detected_rows[i], 1.0)
+        add(prepared, shifts, np.concatenate([rows_early, rows_block, rows_guessed, rows_guessed_block], axis=1),
+            sums.detected_rows[i], 1.0)
         if not detector.noiseless:  # a noiseless detector's noiseless sums are its sums (copied when scoring)
-            kernels.add_recentred(frames.shifted(unit, i, sl, slot=1), shifts, np.concatenate(
-                [rows_early[:, :-1], rows_guessed], axis=1), sums.noiseless_rows[i], 1.0)
-        window_values(detected, shifts, frames.window, frames.in_window[i, sl])
+            self.pending_noiseless.append((i, np.concatenate([rows_early[:, :-1], rows_guessed], axis=1)))
+        self.accumulation.window_values(prepared, shifts, frames.in_window[i, sl])
+
+    def add_noiseless(self, sl: slice, unit: FrameSpectra) -> None:
+        """Pass 1, once every detector has added its frames ``sl``: the noiseless frames (``unit``) with
+        each noisy detector's shifts into that detector's noiseless sums, in the rows
+        :meth:`add_detected` gave them; a sub-pixel method measures their encircled energy's radial
+        sums about every detector's registered positions at once (one reading of each spectrum)."""
+        pending, self.pending_noiseless = self.pending_noiseless, []
+        if not pending:
+            return
+        frames, radial_sums = self.frames, [None] * len(pending)
+        if self.registration.subpixel:
+            detectors = [i for i, _ in pending]
+            centres = frames.n_pixels // 2 - (frames.shifts[detectors, sl] + frames.remainder[detectors, sl])
+            radial_sums = self.run.encircled.radial_sums_about(unit.frames, centres.transpose(1, 0, 2), unit)
+            radial_sums = radial_sums.transpose(1, 0, 2)  # (detector, frame, bin)
+        for (i, rows), about in zip(pending, radial_sums):
+            self.accumulation.add(self._prepared(unit, i, sl, unit.flux(), about, slot=1), frames.shifts[i, sl], rows,
+                                  self.sums.noiseless_rows[i], 1.0)
 
     def rank_late(self) -> None:
         """Pass 2's start: the late criteria's values from the frames' measures, ranked."""
@@ -195,8 +226,8 @@ class MethodRun:
         late, sums = self.late, self.sums
         final_rows = np.concatenate([sums.run_rows(late, self.bins[i, late, sl]),
                                      sums.block_rows(late, sl, self.blocks.bins[i, late, sl])], axis=1)
-        kernels.add_recentred(self.frames.shifted(unit, i, sl), self.frames.shifts[i, sl], final_rows,
-                              sums.detected_rows[i], 1.0)
+        self.accumulation.add(self._prepared(unit, i, sl, self.frames.flux[i, sl]), self.frames.shifts[i, sl],
+                              final_rows, sums.detected_rows[i], 1.0)
 
     def guessed_wrong(self, i: int, sl: slice) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Pass 2, a noisy detector ``i``'s frames ``sl``: the rows (k, late [+ late]) of their final
@@ -220,42 +251,49 @@ class MethodRun:
         self.drawn_again[i] += np.count_nonzero(drawn)
         if not np.array_equal(detected_rows[drawn].sum(axis=1), frames.flux[i, sl][drawn]):
             raise RuntimeError(f"frames {sl.start}.. differ between the two passes")
-        shifts = frames.shifts[i, sl]
+        shifts, add = frames.shifts[i, sl], self.accumulation.add
         moved = final_rows != guessed_rows  # (k, late [+ late]): rows differ where bins do
         out_of, into = np.where(moved, guessed_rows, -1), np.where(moved, final_rows, -1)
-        for slot, (frames_of, partial, m) in enumerate(((detected, sums.detected_rows[i], moved.shape[1]),
-                                                        (unit, sums.noiseless_rows[i], len(self.late)))):
-            frames_of = frames.shifted(frames_of, i, sl, drawn, slot)
-            kernels.add_recentred(frames_of, shifts, out_of[:, :m], partial, -1.0)
-            kernels.add_recentred(frames_of, shifts, into[:, :m], partial, 1.0)
+        for slot, (frames_of, flux, partial, m) in enumerate((
+                (detected, frames.flux[i, sl], sums.detected_rows[i], moved.shape[1]),
+                (unit, unit.flux(), sums.noiseless_rows[i], len(self.late)))):
+            prepared = self._prepared(frames_of, i, sl, flux, which=drawn, slot=slot)
+            add(prepared, shifts, out_of[:, :m], partial, -1.0)
+            add(prepared, shifts, into[:, :m], partial, 1.0)
 
     def score_blocks(self, sl: slice, crits) -> None:
         """Score the rows of criteria ``crits`` (contiguous) of every block the chunk ``sl`` completes."""
-        blocks, run = self.blocks, self.run
+        blocks = self.blocks
         for block, rows in self.sums.completed_blocks(sl, crits):
-            _, *scores = score_partial_sums(rows, len(crits), blocks.n_bins, blocks.last_bin, run.encircled,
-                                            run.peak, run.scale)
+            _, *scores = score_partial_sums(rows, len(crits), blocks.n_bins, blocks.last_bin, self.accumulation.score)
             for values, score in zip(blocks.values, scores):
                 values[block, crits[0]:crits[-1] + 1] = score
 
     def score(self, long_none: np.ndarray, image_crop_px: int | None) -> xr.Dataset:
         """Score the integrated images (cumulative sums of bins) and the long exposures (``long_none``,
         without recentring, shared by the methods): the method's dataset. Frees its partial sums."""
-        run, sums, frames = self.run, self.sums, self.frames
+        run, sums, frames, accumulation = self.run, self.sums, self.frames, self.accumulation
         n_crit = len(run.criteria)
         lc = sums.long_exposure_row
-        long_cog = sums.detected[:, lc]
-        frame_recentred_strehl = value_at_peak(frames.in_window, frames.window, long_cog, frames.flux, run.peak)
-        scoring = (n_crit, sums.n_bins, sums.last_bin, run.encircled, run.peak, run.scale)
+        long_registered = sums.detected[:, lc]
+        frame_recentred_strehl = value_at_peak(frames.in_window, accumulation.window,
+                                               accumulation.images(long_registered), frames.flux, run.peak)
+        scoring = (n_crit, sums.n_bins, sums.last_bin, accumulation.score)
         for i, detector in enumerate(run.detectors):
             if detector.noiseless:
                 sums.noiseless[i] = sums.detected[i, :lc]
         noiseless_scores = score_partial_sums(sums.noiseless, *scoring)[1:]
         sums.noiseless = sums.noiseless_rows = None
-        long_images = np.stack([long_none, long_cog])  # (recentring, det, n, n)
-        images, *run_scores = score_partial_sums(sums.detected[:, :lc], *scoring)
-        sums.detected = sums.detected_rows = long_cog = None
-        long_scores = score_images(long_images, run.peak, run.scale, run.encircled)
+        if isinstance(accumulation, WholeFrames):  # both long exposures whole: scored together
+            long_images = np.stack([long_none, long_registered])  # (recentring, det, n, n)
+            long_scores, long_flux = accumulation.score(long_images), None
+        else:
+            long_images = [long_none, accumulation.images(long_registered).copy()]
+            long_flux = [None, accumulation.flux(long_registered).copy()]
+            long_scores = [np.stack(pair) for pair in zip(score_images(long_none, run.peak, run.scale, run.encircled),
+                                                          accumulation.score(long_registered))]
+        integrated, *run_scores = score_partial_sums(sums.detected[:, :lc], *scoring)
+        sums.detected = sums.detected_rows = long_registered = None
         ds = result_dataset(run.detectors, run.criteria, run.criteria_external, run.fractions, run.counts,
                             run.n_frames, *run_scores, *long_scores, frames.strehl, frames.d50_arcsec(run.scale),
                             frames.centroid, self.values)
@@ -264,7 +302,8 @@ class MethodRun:
         add_recentred_strehl(ds, frame_recentred_strehl)
         add_registration(ds, self.registration.name, frames.registered, frames.unregistered())
         if image_crop_px != 0:
-            ds = add_images(ds, images, long_images, image_crop_px)
+            flux = None if isinstance(accumulation, WholeFrames) else accumulation.flux(integrated)
+            ds = add_images(ds, accumulation.images(integrated), long_images, image_crop_px, flux, long_flux)
         ds.attrs.update(pixel_scale_arcsec=run.scale, diffraction_limited_peak=run.peak, seed=run.seed,
                         n_pixels=frames.n_pixels, frames_drawn_again=self.drawn_again)
         return ds

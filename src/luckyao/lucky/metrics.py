@@ -22,7 +22,7 @@ import pyfftw
 import scipy.fft
 import scipy.special
 
-from .kernels import component, dilate, dirichlet, first_crossing, radial_energy
+from .kernels import component, dilate, dirichlet, first_crossing, radial_energies, radial_energy
 
 
 def centroid_px(images: np.ndarray) -> np.ndarray:
@@ -199,16 +199,16 @@ class EncircledEnergy:
         spectrum = pyfftw.empty_aligned((n, n // 2 + 1), dtype=np.complex64)
         return frame, spectrum, pyfftw.FFTW(frame, spectrum, axes=(0, 1), flags=("FFTW_ESTIMATE",), threads=1)
 
-    def fractions_binned(self, images: np.ndarray, centres_px: np.ndarray,
-                         flux: np.ndarray | None = None, spectra=None) -> np.ndarray:
-        """:meth:`fractions` of images (k, n, n) about ``centres_px`` (k, 2), shape
-        (k, n_radii), summed otherwise: the terms of equal ``|f|`` first (float64, one
-        kernel value each), then (k, bins) @ (bins, n_radii) in float64. The same sum in
-        another order (agrees to float32 rounding); ~4x fewer operations. The spectra are
-        FFTW's (float32, one frame at a time: :attr:`_rfft2`), not scipy's as in
-        :meth:`fractions`: the same transform to float32 rounding. ``flux`` (k,): the images'
-        sums if known (float64; default: summed here). ``spectra``: the images' spectra if known
-        (:class:`.registration.FrameSpectra`, the same FFTW transform), else made here."""
+    def energies_binned(self, images: np.ndarray, centres_px: np.ndarray, spectra=None) -> np.ndarray:
+        """The encircled energies ``EE(R)`` (k, n_radii) on ``radii_px`` of images (k, n, n) about
+        ``centres_px`` (k, 2) (not divided by the flux: linear in the image, so a sum of images
+        has the sum of their energies), summed otherwise than :meth:`fractions`: the terms of
+        equal ``|f|`` first (float64, one kernel value each), then (k, bins) @ (bins, n_radii) in
+        float64. The same sum in another order (agrees to float32 rounding); ~4x fewer
+        operations. The spectra are FFTW's (float32, one frame at a time: :attr:`_rfft2`), not
+        scipy's as in :meth:`fractions`: the same transform to float32 rounding. ``spectra``: the
+        images' spectra if known (:class:`.registration.FrameSpectra`, the same FFTW transform),
+        else made here."""
         images = np.asarray(images)
         n = self.n_pixels
         if images.ndim != 3 or images.shape[1:] != (n, n):
@@ -223,16 +223,68 @@ class EncircledEnergy:
                 fft.execute()
             radial_energy(spectrum if spectra is None else spectra.spectrum(j), centres[j], fy, fx, row_end, bin_of,
                           weight, binned[j])
-        if flux is None:
-            flux = images.sum(axis=(-2, -1), dtype=np.float64)
+        return self.energies_of(binned)
+
+    @property
+    def n_bins(self) -> int:
+        """The radial bins of the kept frequencies (the distinct ``|f|``): the length of
+        :meth:`radial_sums_about`'s sums."""
+        return self._radial[-1].shape[0]
+
+    def radial_sums_about(self, images: np.ndarray, centres_px: np.ndarray, spectra=None,
+                          which: np.ndarray | None = None) -> np.ndarray:
+        """The radial sums (k, m, n_bins) of :meth:`energies_binned` (its terms of equal ``|f|``,
+        before their product with the kernel: :meth:`energies_of`) of images (k, n, n) about several
+        centres each, ``centres_px`` (k, m, 2), each image's spectrum (from ``spectra`` if given)
+        read once for its ``m`` centres (:func:`luckyao.lucky.kernels.radial_energies`: the same
+        sums to ~1e-14); ``which`` (indices): only those images, (len(which), m, n_bins). Linear in
+        the image, as the energies: a sum of images has the sum of their radial sums."""
+        fy, fx, row_end, bin_of, weight, _ = self._radial
+        frame, spectrum, fft = self._rfft2
+        which = np.arange(len(images)) if which is None else np.asarray(which)
+        centres = np.ascontiguousarray(np.asarray(centres_px, dtype=np.float64)[which])
+        sums = np.empty((len(which), centres.shape[1], self.n_bins))
+        binned = np.empty((self.n_bins, centres.shape[1]))
+        for out, j, about in zip(sums, which, centres):
+            if spectra is None:
+                np.copyto(frame, images[j], casting="same_kind")
+                fft.execute()
+            radial_energies(spectrum if spectra is None else spectra.spectrum(j), about, fy, fx, row_end, bin_of,
+                            weight, binned)
+            out[:] = binned.T
+        return sums
+
+    def energies_of(self, radial_sums: np.ndarray) -> np.ndarray:
+        """The encircled energies (..., n_radii) on ``radii_px`` of radial sums (..., n_bins)
+        (:meth:`radial_sums_about`, or a sum of them): their product with the kernel, float64."""
+        shape = radial_sums.shape[:-1]
+        return (radial_sums.reshape(-1, self.n_bins) @ self._radial[-1]).reshape(*shape, self.n_radii)
+
+    def fractions_binned(self, images: np.ndarray, centres_px: np.ndarray,
+                         flux: np.ndarray | None = None, spectra=None) -> np.ndarray:
+        """:meth:`fractions` of images (k, n, n) about ``centres_px`` (k, 2), shape (k, n_radii):
+        :meth:`energies_binned` over ``flux`` (k,), the images' sums if known (float64; default:
+        summed here)."""
+        return self.fractions_of(self.energies_binned(images, centres_px, spectra),
+                                 images.sum(axis=(-2, -1), dtype=np.float64) if flux is None else flux)
+
+    @staticmethod
+    def fractions_of(energies: np.ndarray, flux: np.ndarray) -> np.ndarray:
+        """Encircled-energy fractions ``EE(R) / F`` (..., n_radii) of energies (..., n_radii) and
+        fluxes (...); NaN where the flux is not positive."""
         flux = np.asarray(flux, dtype=np.float64)
         with np.errstate(invalid="ignore", divide="ignore"):
-            return np.where(flux[:, None] > 0, (binned @ kernel) / flux[:, None], np.nan)
+            return np.where(flux[..., None] > 0, energies / flux[..., None], np.nan)
 
     def radius_px_binned(self, images: np.ndarray, centres_px: np.ndarray, level: float = 0.5,
                          flux: np.ndarray | None = None, spectra=None) -> np.ndarray:
         """:meth:`radius_px` of images (k, n, n) from :meth:`fractions_binned`, shape (k,)."""
         return _first_crossing(self.radii_px, self.fractions_binned(images, centres_px, flux, spectra), level)
+
+    def radius_px_of(self, energies: np.ndarray, flux: np.ndarray, level: float = 0.5) -> np.ndarray:
+        """:meth:`radius_px` of images whose encircled energies on ``radii_px`` are ``energies``
+        (..., n_radii) (:meth:`energies_binned`, or a sum of them) and fluxes ``flux`` (...)."""
+        return _first_crossing(self.radii_px, self.fractions_of(energies, flux), level)
 
     def radius_px(self, images: np.ndarray, level: float = 0.5,
                   centres_px: np.ndarray | None = None) -> np.ndarray:

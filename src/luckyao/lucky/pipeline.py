@@ -48,11 +48,14 @@ Alongside, the noiseless frames (the input, as float32) get the same detector's 
 and the same bins into a second set of partial sums: the ``*_noiseless`` scores separate a
 wrong selection or recentring from the noise in the final image. The sums are float64
 throughout, frame by frame (:func:`.kernels.add_recentred`); a noiseless detector's second
-set is its first, copied, so its ``*_noiseless`` values equal the others bit for bit.
+set is its first, copied, so its ``*_noiseless`` values equal the others bit for bit. The
+sub-pixel methods add, instead of whole frames, each registered frame's central crop, its
+encircled energy's radial sums about the axis and its flux (:mod:`.cropped`: an eighth of the
+memory and its traffic), from which their integrated images are scored.
 Memory: per method, the two sets of partial sums, float64 (2 x detectors x criteria x distinct
-counts x n x n), plus a chunk's work arrays (~1 kB per pixel and frame of a chunk) and, when
-scoring, the integrated images (criteria x fractions x detectors x n x n) of one set of one
-method at a time (the cumulative sums are made in place).
+counts x n x n; a sub-pixel method's ~1/8 of that), plus a chunk's work arrays (~1 kB per
+pixel and frame of a chunk) and, when scoring, the integrated images (criteria x fractions x
+detectors x n x n) of one set of one method at a time (the cumulative sums are made in place).
 
 Monte-Carlo errors (``n_blocks`` >= 2): the frames are cut into ``n_blocks`` time blocks of
 ``n_frames // n_blocks`` frames (the remainder left out), each block is selected, recentred
@@ -108,7 +111,8 @@ def run_lucky(iter_chunks: Chunks, n_frames: int, detectors: Sequence[Detector],
               criteria_external: Sequence[ExternalCriterion] = (),
               image_crop_px: int | None = 64, reference: ImageReference | None = None,
               n_blocks: int = 0, progress_interval_s: float = 5.0,
-              registration: Registration = COG, matched_strehl: MatchedStrehl | None = None) -> xr.Dataset:
+              registration: Registration = COG, matched_strehl: MatchedStrehl | None = None,
+              crop_px: int | None = None) -> xr.Dataset:
     """Lucky imaging of one frame cube for several detectors, criteria and fractions (module docstring).
 
     ``iter_chunks()`` returns a fresh iterator of ``(start, frames)``: ``frames``
@@ -128,6 +132,7 @@ def run_lucky(iter_chunks: Chunks, n_frames: int, detectors: Sequence[Detector],
     count ``unregistered_frames`` (detector)) and, for every method but ``cog``, a frame's d50
     is about its registered position. With ``matched_strehl`` (:class:`.scoring.MatchedStrehl`),
     a frame's Strehl (its criterion) is that of its matched-filtered peak, not of its brightest pixel.
+    ``crop_px``: a sub-pixel method's crop (:mod:`.cropped`; default :func:`.cropped.crop_px`, 1.25").
 
     Returns a CF-style :class:`xarray.Dataset`: ``strehl``, ``fwhm_arcsec``,
     ``d50_arcsec`` (criterion, fraction, detector) and the same of the noiseless frames
@@ -147,7 +152,7 @@ def run_lucky(iter_chunks: Chunks, n_frames: int, detectors: Sequence[Detector],
     return run_lucky_methods(iter_chunks, n_frames, detectors, fractions, diffraction_limited_peak,
                              pixel_scale_arcsec, seed, criteria_external, image_crop_px,
                              None if reference is None else [reference], n_blocks, progress_interval_s,
-                             [registration], matched_strehl)[0]
+                             [registration], matched_strehl, crop_px)[0]
 
 
 def run_lucky_methods(iter_chunks: Chunks, n_frames: int, detectors: Sequence[Detector], fractions: Sequence[float],
@@ -156,7 +161,7 @@ def run_lucky_methods(iter_chunks: Chunks, n_frames: int, detectors: Sequence[De
                       image_crop_px: int | None = 64, references: Sequence[ImageReference] | None = None,
                       n_blocks: int = 0, progress_interval_s: float = 5.0,
                       registrations: Sequence[Registration] = (COG,),
-                      matched_strehl: MatchedStrehl | None = None) -> list[xr.Dataset]:
+                      matched_strehl: MatchedStrehl | None = None, crop_px: int | None = None) -> list[xr.Dataset]:
     """:func:`run_lucky` of every registration method of ``registrations`` (distinct) in the same
     passes over the frames: each chunk is read and each detector's noise drawn once for all of
     them. ``references``: None, or one :class:`ImageReference` per method (that method's, e.g. the
@@ -164,7 +169,7 @@ def run_lucky_methods(iter_chunks: Chunks, n_frames: int, detectors: Sequence[De
     that of :func:`run_lucky` with that method (and reference) alone."""
     run = _LuckyRun(iter_chunks, n_frames, list(detectors), fractions, diffraction_limited_peak,
                     pixel_scale_arcsec, seed, list(criteria_external), references, n_blocks, progress_interval_s,
-                    list(registrations), matched_strehl)
+                    list(registrations), matched_strehl, crop_px)
     run.measure_noiseless()
     run.detect_and_add()
     run.move_guessed_wrong()
@@ -211,7 +216,8 @@ class _LuckyRun:
     def __init__(self, iter_chunks: Chunks, n_frames: int, detectors: list[Detector], fractions,
                  diffraction_limited_peak: float, pixel_scale_arcsec: float, seed: int,
                  criteria_external: list[ExternalCriterion], references, n_blocks: int,
-                 progress_interval_s: float, registrations: list[Registration], matched_strehl: MatchedStrehl | None):
+                 progress_interval_s: float, registrations: list[Registration], matched_strehl: MatchedStrehl | None,
+                 crop_px: int | None):
         self.iter_chunks, self.n_frames, self.detectors, self.fractions = iter_chunks, n_frames, detectors, fractions
         self.peak, self.scale, self.seed, self.n_blocks = diffraction_limited_peak, pixel_scale_arcsec, seed, n_blocks
         self.criteria_external, self.progress_interval_s = criteria_external, progress_interval_s
@@ -219,7 +225,7 @@ class _LuckyRun:
         self.criteria = list(IMAGE_CRITERIA) + [(c.name, bool(c.larger_is_better)) for c in criteria_external]
         self.larger = [larger for _, larger in self.criteria]
         _check(n_frames, detectors, criteria_external, registrations, references)
-        self.matched_strehl = matched_strehl
+        self.matched_strehl, self.crop_px = matched_strehl, crop_px
         self.methods = [MethodRun(self, registration, None if references is None else reference)
                         for registration, reference in zip(registrations, references or registrations)]
         self.guessing = any(m.guessing for m in self.methods)  # the same for every method
@@ -248,6 +254,22 @@ class _LuckyRun:
             return flux, centroids, self.matched_strehl(spectra.frames, flux, spectra)
         return flux, centroids, strehl_from(peak, flux, self.peak)
 
+    def measures(self, spectra: FrameSpectra, common: tuple[np.ndarray, ...]) -> list[tuple[np.ndarray, ...]]:
+        """Every method's measures (:meth:`.MethodRun.measures`) of the frames of ``spectra`` whose
+        flux, centre of gravity and Strehl are ``common``; the sub-pixel methods' radial sums about
+        their registered positions all from one reading of each frame's spectrum
+        (:meth:`.metrics.EncircledEnergy.radial_sums_about`)."""
+        registered = [method.registered(spectra, common) for method in self.methods]
+        about = [j for j, (method, r) in enumerate(zip(self.methods, registered))
+                 if method.registration.subpixel and r is not None]
+        radial = [None] * len(self.methods)
+        if about:
+            centres = np.stack([registered[j] for j in about], axis=1)  # (k, methods, 2)
+            for j, sums in zip(about, self.encircled.radial_sums_about(spectra.frames, centres, spectra)
+                               .transpose(1, 0, 2)):
+                radial[j] = sums
+        return [method.measures(spectra, common, r, sums) for method, r, sums in zip(self.methods, registered, radial)]
+
     def measure_noiseless(self) -> None:
         """Pass 0 (guessing only): the noiseless frames' measures by every method, the guesses'
         predictor (and the noiseless detectors' measures)."""
@@ -258,8 +280,8 @@ class _LuckyRun:
         for sl, unit in self._chunks("pass 0/2: noiseless frames"):
             spectra = self.unit.reset(unit)
             common = self.common_measures(spectra, *frame_sums(unit))
-            for method, whole in zip(self.methods, clean):
-                for to, part in zip(whole, method.measures(spectra, common)):
+            for whole, measured in zip(clean, self.measures(spectra, common)):
+                for to, part in zip(whole, measured):
                     to[sl] = part
         for method, whole in zip(self.methods, clean):
             method.keep_noiseless(whole)
@@ -282,18 +304,19 @@ class _LuckyRun:
                     detected, rows, cols, peak = chunk.detect(detector, self.seed, sl.start, self.noise.buffer)
                     spectra = self.detected.reset(detected)
                     common = self.common_measures(spectra, rows, cols, peak)
-                    measures = [method.measures(spectra, common) for method in self.methods]
+                    measures = self.measures(spectra, common)
                 elif self.clean is not None:  # measured in pass 0
                     spectra = spectra_unit
                     measures = [[x[sl] for x in whole] for whole in self.clean]
                 else:
                     spectra = spectra_unit
                     common = self.common_measures(spectra, *frame_sums(unit))
-                    measures = [method.measures(spectra, common) for method in self.methods]
+                    measures = self.measures(spectra, common)
                 kernels.add_frames(spectra.frames, self.long_none[i])
                 for method, measured in zip(self.methods, measures):
-                    method.add_detected(i, detector, sl, spectra, spectra_unit, measured)
+                    method.add_detected(i, detector, sl, spectra, measured)
             for method in self.methods:
+                method.add_noiseless(sl, spectra_unit)
                 method.score_blocks(sl, method.early)
 
     def move_guessed_wrong(self) -> None:

@@ -27,10 +27,13 @@ Methods (:data:`REGISTRATIONS`):
   Strehl up), and it is the matched filter of the diffraction-limited speckle that the
   selected frames hold.
 
-The sub-pixel methods' shifts are split into a whole-pixel part (applied as ``np.roll``,
-by :func:`.kernels.add_recentred`) and a remainder in [-1/2, 1/2) applied as a Fourier
-shift (:func:`fourier_shift`): it conserves the flux, and a whole-pixel shift gives
-exactly the roll (the remainder is then zero and the frame untouched).
+The sub-pixel methods filter and search only the central :data:`SEARCH_ARCSEC` square of the
+frame (the search box, periodic over itself: the star's wander stays well inside), as a
+pipeline looks for the star where it can be. Their shifts are split into a whole-pixel part
+(a roll) and a remainder in (-1/2, 1/2] applied as a Fourier shift (:func:`fourier_shift`):
+it conserves the flux, and a whole-pixel shift gives exactly the roll (the remainder is then
+zero and the frame untouched); :mod:`.cropped` applies both to the central crop that such a
+method adds up.
 """
 
 from dataclasses import dataclass
@@ -40,6 +43,7 @@ import numpy as np
 import pyfftw
 import scipy.fft
 
+from . import kernels
 from .accumulation import recentring_shifts_px
 
 REGISTRATIONS = ("cog", "windowed_cog", "peak", "xcorr")
@@ -50,6 +54,20 @@ WINDOW_RADIUS_FWHM = 2.0
 
 WINDOW_ITERATIONS = 2
 """Centres of gravity ``windowed_cog`` takes, each in the disc about the previous position."""
+
+SEARCH_ARCSEC = 2.5
+"""Side of the search box about the axis [arcsec] in which the sub-pixel methods look for the star
+(the filtered frame's peak): +-1.25", five times the wander an LGS system leaves uncorrected
+(tip-tilt, ~0.25" rms). A quarter of the 5" camera's pixels: fewer noise peaks to mistake for the
+star at low signal, and filters a quarter the size (:func:`search_px`)."""
+
+
+def search_px(n_pixels: int, pixel_scale_arcsec: float) -> int:
+    """Pixels across the search box of frames of ``n_pixels`` square at ``pixel_scale_arcsec``:
+    the number of the frame's parity spanning at least :data:`SEARCH_ARCSEC`, at most the frame
+    (128 for the 4.2 m camera's 256 pixels over 5")."""
+    m = int(np.ceil(SEARCH_ARCSEC / pixel_scale_arcsec))
+    return min(n_pixels, m + (m - n_pixels) % 2)
 
 
 def gaussian_kernel(n_pixels: int, fwhm_px: float) -> np.ndarray:
@@ -72,7 +90,6 @@ class _Transforms:
         self.forward = pyfftw.FFTW(self.frame, self.spectrum, axes=(0, 1), flags=("FFTW_ESTIMATE",), threads=1)
         self.backward = pyfftw.FFTW(self.spectrum, self.frame, axes=(0, 1), direction="FFTW_BACKWARD",
                                     flags=("FFTW_ESTIMATE", "FFTW_DESTROY_INPUT"), threads=1)
-        self.ky, self.kx = np.fft.fftfreq(n), np.fft.rfftfreq(n)
 
     def transform(self, frame: np.ndarray, out: np.ndarray) -> None:
         """``out`` (n, n/2 + 1) = the real FFT of ``frame``."""
@@ -87,14 +104,6 @@ class _Transforms:
         self.backward()  # normalised by FFTW's interface (1 / n^2)
         out[:] = self.frame
 
-    def shift(self, spectrum: np.ndarray, shift_px: np.ndarray, out: np.ndarray) -> None:
-        """``out`` = the frame of ``spectrum`` shifted by ``shift_px`` (y, x): the spectrum times the separable ramp."""
-        self.spectrum[:] = spectrum
-        self.spectrum *= np.exp(-2j * np.pi * self.ky * shift_px[0]).astype(np.complex64)[:, None]
-        self.spectrum *= np.exp(-2j * np.pi * self.kx * shift_px[1]).astype(np.complex64)[None, :]
-        self.backward()
-        out[:] = self.frame
-
 
 @lru_cache(maxsize=4)
 def _transforms(n: int) -> _Transforms:
@@ -102,15 +111,16 @@ def _transforms(n: int) -> _Transforms:
 
 
 class FrameSpectra:
-    """The real FFTs (FFTW float32) of a chunk of frames (k, n, n), each made once when first
-    needed, and shared by what is made of them: the frames filtered by a registration's kernel
-    (made once per kernel: ``windowed_cog``, ``peak`` and the matched-filter Strehl share theirs),
-    their Fourier shifts (:meth:`shifted`) and their encircled energy
-    (:meth:`.metrics.EncircledEnergy.fractions_binned`). The same values as transforming each
+    """The real FFTs (FFTW float32) of a chunk of frames (k, n, n), and of their central squares
+    (:meth:`box_spectrum`: a registration's search box), each made once when first needed, and
+    shared by what is made of them: the frames filtered by a registration's kernel (made once per
+    kernel: ``windowed_cog`` and ``peak`` share theirs) and their encircled energy
+    (:meth:`.metrics.EncircledEnergy.energies_binned`). The same values as transforming each
     frame again for each use. :meth:`reset` holds another chunk (the buffers reused)."""
 
     def __init__(self, frames: np.ndarray | None = None):
         self.frames, self._spectra, self._done, self._buffers, self._filtered = None, None, None, {}, {}
+        self._flux, self._boxes, self._box_chunk = None, {}, {}
         if frames is not None:
             self.reset(frames)
 
@@ -119,10 +129,10 @@ class FrameSpectra:
         k, n = len(frames), frames.shape[-1]
         if self._spectra is None or len(self._spectra) < k or self._spectra.shape[1] != n:
             self._spectra = np.empty((k, n, n // 2 + 1), np.complex64)
-            self._done, self._buffers = np.zeros(k, bool), {}
+            self._done, self._buffers, self._boxes = np.zeros(k, bool), {}, {}
         self.frames = frames
         self._done[:] = False
-        self._filtered = {}
+        self._filtered, self._flux = {}, None
         return self
 
     def spectrum(self, j: int) -> np.ndarray:
@@ -132,37 +142,89 @@ class FrameSpectra:
             self._done[j] = True
         return self._spectra[j]
 
+    def box_spectrum(self, j: int, m: int) -> np.ndarray:
+        """The real FFT (m, m/2 + 1) complex64 of frame ``j``'s central ``m`` square (rows and
+        columns ``n/2 - m/2 ..``; the whole frame's :meth:`spectrum` if ``m`` is ``n``)."""
+        n = self.frames.shape[-1]
+        if m == n:
+            return self.spectrum(j)
+        boxes = self._boxes.get(m)
+        if boxes is None or len(boxes[0]) < len(self._spectra):
+            boxes = self._boxes[m] = (np.empty((len(self._spectra), m, m // 2 + 1), np.complex64),
+                                      np.zeros(len(self._spectra), bool))
+        spectra, done = boxes
+        if self._box_chunk.get(m) is not self.frames:  # another chunk: forget this size's spectra
+            done[:] = False
+            self._box_chunk[m] = self.frames
+        if not done[j]:
+            lo = n // 2 - m // 2
+            _transforms(m).transform(self.frames[j, lo:lo + m, lo:lo + m], spectra[j])
+            done[j] = True
+        return spectra[j]
+
     def filtered(self, key, kernel_ft: np.ndarray) -> np.ndarray:
-        """The frames (k, n, n) float32 convolved with the kernel of spectrum ``kernel_ft`` (made once
-        per ``key``, which names the kernel; read only)."""
+        """The frames' central ``m`` squares (k, m, m) float32 (``m`` the kernel's size, at most n)
+        convolved, periodically over the square, with the kernel of spectrum ``kernel_ft`` (m, m/2 + 1)
+        (made once per ``key``, which names the kernel; read only)."""
         if key not in self._filtered:
-            k, n = len(self.frames), self.frames.shape[-1]
+            k, m = len(self.frames), kernel_ft.shape[0]
             buffer = self._buffers.get(key)
             if buffer is None or len(buffer) < k:
-                buffer = self._buffers[key] = np.empty((len(self._spectra), n, n), np.float32)
-            transforms = _transforms(n)
+                buffer = self._buffers[key] = np.empty((len(self._spectra), m, m), np.float32)
+            transforms = _transforms(m)
             for j in range(k):
-                transforms.filter(self.spectrum(j), kernel_ft, buffer[j])
+                transforms.filter(self.box_spectrum(j, m), kernel_ft, buffer[j])
             self._filtered[key] = buffer[:k]
         return self._filtered[key]
 
-    def shifted(self, which: np.ndarray, shifts_px: np.ndarray, out: np.ndarray) -> np.ndarray:
-        """Frames ``which`` (indices) shifted by ``shifts_px`` (len(which), 2) (y, x) [pixel] into
-        the same frames of ``out`` (k, n, n) (:func:`fourier_shift`; the others untouched)."""
-        transforms = _transforms(self.frames.shape[-1])
-        for j, s in zip(which, np.asarray(shifts_px, dtype=np.float64)):
-            transforms.shift(self.spectrum(j), s, out[j])
-        return out
+    def flux(self) -> np.ndarray:
+        """The frames' fluxes (k,) (float64 sums; made once per chunk)."""
+        if self._flux is None:
+            self._flux = self.frames.sum(axis=(1, 2), dtype=np.float64)
+        return self._flux
 
 
-def fourier_shift(frames: np.ndarray, shifts_px: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
-    """Frames (k, n, n) shifted by ``shifts_px`` (k, 2) (y, x) [pixel], periodic:
+FOURIER_SHIFT_BATCH = 64
+"""Frames transformed at once by :func:`fourier_shift` (FFTW plans of powers of two up to it)."""
+
+
+class _BatchTransforms:
+    """FFTW's real 2-D transforms of ``b`` frames (b, n, n) float32 at once, both ways, in place of
+    their buffers (FFTW_ESTIMATE, as :class:`_Transforms`). Not thread-safe."""
+
+    def __init__(self, b: int, n: int):
+        self.frames = pyfftw.zeros_aligned((b, n, n), dtype=np.float32)
+        self.spectra = pyfftw.zeros_aligned((b, n, n // 2 + 1), dtype=np.complex64)
+        self.forward = pyfftw.FFTW(self.frames, self.spectra, axes=(1, 2), flags=("FFTW_ESTIMATE",), threads=1)
+        self.backward = pyfftw.FFTW(self.spectra, self.frames, axes=(1, 2), direction="FFTW_BACKWARD",
+                                    flags=("FFTW_ESTIMATE", "FFTW_DESTROY_INPUT"), threads=1)
+
+
+@lru_cache(maxsize=16)
+def _batch_transforms(b: int, n: int) -> _BatchTransforms:
+    return _BatchTransforms(b, n)
+
+
+def fourier_shift(frames: np.ndarray, shifts_px: np.ndarray) -> np.ndarray:
+    """Frames (k, n, n) float32 shifted by ``shifts_px`` (k, 2) (y, x) [pixel], periodic:
     ``out(r) = frame(r - s)`` for the band-limited frame, by the phase ramp
-    ``exp(-2 pi i k.s / n)`` on its real FFT (FFTW, float32). Conserves the flux (the zero
-    frequency is untouched); a whole-pixel shift equals ``np.roll`` to float rounding."""
+    ``exp(-2 pi i k.s / n)`` on its real FFT (FFTW, float32, :data:`FOURIER_SHIFT_BATCH` frames at a
+    time; the ramp :func:`.kernels.phase_ramps`; the Nyquist terms made real by the inverse
+    transform). Conserves the flux (the zero frequency is untouched); a whole-pixel shift equals
+    ``np.roll`` to float rounding."""
     frames = np.asarray(frames, dtype=np.float32)
-    out = np.empty(frames.shape, np.float32) if out is None else out
-    return FrameSpectra(frames).shifted(np.arange(len(frames)), shifts_px, out)
+    shifts_px = np.ascontiguousarray(shifts_px, dtype=np.float64)
+    k, n = len(frames), frames.shape[-1]
+    out = np.empty(frames.shape, np.float32)
+    for start in range(0, k, FOURIER_SHIFT_BATCH):
+        m = min(FOURIER_SHIFT_BATCH, k - start)
+        batch = _batch_transforms(1 << (m - 1).bit_length(), n)  # the other frames of the batch: ignored
+        batch.frames[:m] = frames[start:start + m]
+        batch.forward()
+        kernels.phase_ramps(batch.spectra[:m], shifts_px[start:start + m])
+        batch.backward()  # normalised by FFTW's interface (1 / n^2)
+        out[start:start + m] = batch.frames[:m]
+    return out
 
 
 def parabola_offset(below: np.ndarray, at: np.ndarray, above: np.ndarray) -> np.ndarray:
@@ -180,12 +242,15 @@ class Registration:
 
     ``diffraction_limited`` (n, n): the unit-flux diffraction-limited image, peak on
     (n/2, n/2) (``Imager.diffraction_limited``; ``xcorr``'s reference); ``core_fwhm_px``:
-    the FWHM of its core [pixel] (the matched filter of ``windowed_cog`` and ``peak``).
+    the FWHM of its core [pixel] (the matched filter of ``windowed_cog`` and ``peak``);
+    ``search_px``: the side of the central square (the search box, :func:`search_px`) in which
+    the sub-pixel methods look for the filtered frame's peak (None: the whole frame).
     """
 
     name: str
     diffraction_limited: np.ndarray | None = None
     core_fwhm_px: float = 0.0
+    search_px: int | None = None
 
     def __post_init__(self):
         if self.name not in REGISTRATIONS:
@@ -194,11 +259,16 @@ class Registration:
             raise ValueError(f"registration {self.name!r} needs the diffraction-limited image and core FWHM")
         if self.name != "cog":
             n = self.diffraction_limited.shape[-1]
-            if self.name == "xcorr":  # correlation with the reference: its conjugate spectrum, axis at 0
-                reference = np.roll(self.diffraction_limited, (-(n // 2), -(n // 2)), axis=(0, 1))
+            m = n if self.search_px is None else self.search_px
+            if not (0 < m <= n and (n - m) % 2 == 0):
+                raise ValueError(f"search_px must be in 1..{n}, of the parity of {n}: got {self.search_px}")
+            if self.name == "xcorr":  # correlation with the reference (its central m square): its conjugate spectrum
+                lo = n // 2 - m // 2
+                reference = np.roll(self.diffraction_limited[lo:lo + m, lo:lo + m], (-(m // 2), -(m // 2)),
+                                    axis=(0, 1))  # axis at 0
                 kernel_ft = np.conj(scipy.fft.rfft2(reference / reference.sum()))
             else:
-                kernel_ft = scipy.fft.rfft2(gaussian_kernel(n, self.core_fwhm_px))
+                kernel_ft = scipy.fft.rfft2(gaussian_kernel(m, self.core_fwhm_px))
             object.__setattr__(self, "_kernel_ft", kernel_ft.astype(np.complex64))
 
     @property
@@ -209,12 +279,14 @@ class Registration:
     @property
     def filter_key(self) -> tuple:
         """Names the method's kernel (:meth:`FrameSpectra.filtered`): the Gaussian of the core's FWHM
-        (``windowed_cog``, ``peak``), or this method's reference (``xcorr``)."""
-        return ("xcorr", id(self)) if self.name == "xcorr" else ("gaussian", self.core_fwhm_px)
+        over the search box (``windowed_cog``, ``peak``), or this method's reference (``xcorr``)."""
+        if self.name == "xcorr":
+            return "xcorr", id(self)
+        return "gaussian", self.core_fwhm_px, self._kernel_ft.shape[0]
 
     def filtered(self, frames: np.ndarray, spectra: FrameSpectra | None = None) -> np.ndarray:
-        """The frames (k, n, n) correlated with the method's kernel (float32; read only), from their
-        ``spectra`` if given (of these frames)."""
+        """The frames' search boxes (k, m, m) correlated with the method's kernel (float32; read
+        only; the whole frames without a search box), from their ``spectra`` if given (of these frames)."""
         spectra = FrameSpectra(np.asarray(frames, dtype=np.float32)) if spectra is None else spectra
         return spectra.filtered(self.filter_key, self._kernel_ft)
 
@@ -226,18 +298,19 @@ class Registration:
         if self.name == "cog":
             return np.asarray(centroids_px, dtype=np.float64)
         filtered = self.filtered(frames, spectra)
-        k, n, _ = filtered.shape
+        k, m, _ = filtered.shape
+        lo = frames.shape[-1] // 2 - m // 2  # the search box's first row and column in the frame
         flat = filtered.reshape(k, -1)
         best = np.argmax(flat, axis=1)
-        iy, ix = best // n, best % n
+        iy, ix = best // m, best % m
         j = np.arange(k)
         ok = flat[j, best] > 0  # a peak (a noisy frame's total flux may be negative and its peak still clear)
         if self.name == "windowed_cog":
-            position = self._windowed_cog(frames, np.stack([iy, ix], axis=1).astype(np.float64))
+            position = self._windowed_cog(frames, lo + np.stack([iy, ix], axis=1).astype(np.float64))
         else:
-            dy = parabola_offset(filtered[j, (iy - 1) % n, ix], filtered[j, iy, ix], filtered[j, (iy + 1) % n, ix])
-            dx = parabola_offset(filtered[j, iy, (ix - 1) % n], filtered[j, iy, ix], filtered[j, iy, (ix + 1) % n])
-            position = np.stack([iy + dy, ix + dx], axis=1).astype(np.float64)
+            dy = parabola_offset(filtered[j, (iy - 1) % m, ix], filtered[j, iy, ix], filtered[j, (iy + 1) % m, ix])
+            dx = parabola_offset(filtered[j, iy, (ix - 1) % m], filtered[j, iy, ix], filtered[j, iy, (ix + 1) % m])
+            position = lo + np.stack([iy + dy, ix + dx], axis=1).astype(np.float64)
         return np.where(ok[:, None] & np.isfinite(position), position, np.nan)
 
     def _windowed_cog(self, frames: np.ndarray, start_px: np.ndarray) -> np.ndarray:

@@ -6,12 +6,13 @@ sums of :class:`.accumulation.PartialSums` (:func:`integrated_images`,
 :func:`score_partial_sums`) and to the frames' values near the axis (:func:`value_at_peak`).
 """
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 
 from . import kernels
-from .metrics import EncircledEnergy, relative_to_diffraction_limit, score_images, strehl_from
+from .metrics import relative_to_diffraction_limit, strehl_from
 
 
 def frame_sums(frames: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -53,27 +54,29 @@ class MatchedStrehl:
 
 
 def integrated_images(partial: np.ndarray, n_crit: int, n_bins: int, last_bin: np.ndarray) -> np.ndarray:
-    """Integrated images (criterion, fraction, det, n, n) of the (det, criterion x bin, n, n)
-    partial sums: fraction ``k``'s is the sum of bins ``0..last_bin[k]`` (cumulative sums made
-    in place: ``partial`` is overwritten). Contiguous, so the d50's batches need no copy."""
-    n_det, _, ny, nx = partial.shape
-    cumulative = partial.reshape(n_det, n_crit, n_bins, ny, nx)
+    """Integrated images (criterion, fraction, det, *item) of the (det, criterion x bin, *item)
+    partial sums (an item: a whole frame (n, n), or a sub-pixel method's vector,
+    :class:`.cropped.CroppedFrames`): fraction ``k``'s is the sum of bins ``0..last_bin[k]``
+    (cumulative sums made in place: ``partial`` is overwritten). Contiguous, so the d50's batches
+    need no copy."""
+    n_det, item = partial.shape[0], partial.shape[2:]
+    cumulative = partial.reshape(n_det, n_crit, n_bins, *item)
     for b in range(1, n_bins):  # np.cumsum's sums, in place
         cumulative[:, :, b] += cumulative[:, :, b - 1]
-    images = np.empty((n_crit, len(last_bin), n_det, ny, nx))
+    images = np.empty((n_crit, len(last_bin), n_det, *item))
     for i in range(n_det):
         images[:, :, i] = cumulative[i][:, last_bin]
     return images
 
 
 def score_partial_sums(partial: np.ndarray, n_crit: int, n_bins: int, last_bin: np.ndarray,
-                       encircled: EncircledEnergy, diffraction_limited_peak: float,
-                       pixel_scale_arcsec: float) -> tuple[np.ndarray, ...]:
+                       score: Callable) -> tuple[np.ndarray, ...]:
     """The :func:`integrated_images` of partial sums (``partial`` is overwritten) and their
-    Strehl, FWHM [arcsec] and d50 [arcsec] (criterion, fraction, det) (:func:`.metrics.score_images`).
+    Strehl, FWHM [arcsec] and d50 [arcsec] (criterion, fraction, det) by ``score`` (the
+    accumulation's: :class:`.accumulation.WholeFrames`, :class:`.cropped.CroppedFrames`).
     One code path for the noisy and the noiseless sums, so equal sums give bit-identical scores."""
     images = integrated_images(partial, n_crit, n_bins, last_bin)
-    return (images, *score_images(images, diffraction_limited_peak, pixel_scale_arcsec, encircled))
+    return (images, *score(images))
 
 
 def value_at_peak(frame_window: np.ndarray, window: np.ndarray, long_images: np.ndarray,

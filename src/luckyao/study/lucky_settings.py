@@ -7,7 +7,7 @@ The dict comes from ``config.lucky_settings`` (validated; defaults in ``config.s
 from dataclasses import dataclass
 
 from ..lucky.detector import Detector
-from ..lucky.registration import Registration
+from ..lucky.registration import Registration, search_px
 from ..lucky.scoring import MatchedStrehl
 from ..optics.imaging import Imager
 from .case import Case
@@ -55,8 +55,12 @@ class LuckySettings:
 
     def registration_methods(self) -> list[Registration]:
         """The registration methods, built for the case's camera: the diffraction-limited image
-        (``xcorr``'s reference) and the core's FWHM, lambda/D [pixel] (the matched filter)."""
-        return [Registration(name, self._diffraction_limited(), self._core_fwhm_px()) for name in self.registrations]
+        (``xcorr``'s reference), the core's FWHM, lambda/D [pixel] (the matched filter) and the
+        search box (:func:`luckyao.lucky.registration.search_px`)."""
+        camera = self.case.camera
+        box = search_px(camera.n_pixels, camera.pixel_scale_arcsec)
+        return [Registration(name, self._diffraction_limited(), self._core_fwhm_px(), box)
+                for name in self.registrations]
 
     def matched_strehl(self) -> MatchedStrehl | None:
         """The frames' matched-filter Strehl (``frame_strehl: matched_filter``), else None."""

@@ -16,9 +16,9 @@ paper-fidelity run (README, Paper fidelity):
 * simulate: ``SIMULATE_BYTES`` measured (the screens are memory-mapped) plus the
   matrices and slopes it loads and a block of frames; the frame cube it writes, 4 bytes
   per pixel of every imaged target's frames;
-* lucky: 1.5 GB and 0.21 GB of partial sums per detector and registration method for a
-  256-pixel camera at paper fidelity (the sweep's 19 detectors, ``cog`` alone: 4.7 GB
-  measured), the partial sums scaling with the camera's pixels.
+* lucky: 1.5 GB and 0.21 GB of partial sums per detector for a 256-pixel camera at paper
+  fidelity (the sweep's 19 detectors, ``cog`` alone: 4.7 GB measured), the partial sums
+  scaling with the camera's pixels; a sub-pixel registration method's ~1/8 of that more.
 
 Each rule declares ``mem_mb`` from the same estimate (``mem_mb``: x ``MARGIN``, at
 least the rule's measured paper-fidelity need; lucky's estimate is its measured
@@ -125,12 +125,20 @@ def simulate_memory_bytes(case: dict) -> float:
     return SIMULATE_BYTES + matrices + block
 
 
+SUBPIXEL_SUMS_FRACTION = (64**2 + 4357 + 1) / 256**2
+"""A sub-pixel method's partial sums over a whole frame's (:mod:`luckyao.lucky.cropped`: a 1.25"
+crop, the encircled energy's 4,357 radial sums and the flux per frame, for the 4.2 m camera's
+5"; at 8.2 m the radial sums are a smaller part)."""
+
+
 def lucky_memory_bytes(settings: dict) -> float:
-    """A case's post-processing (``config.lucky_settings``): 1.5 GB and 0.21 GB of partial
-    sums per detector and registration method (their sums all held at once: the methods share
-    the passes over the frames) for a 256-pixel camera."""
+    """A case's post-processing (``config.lucky_settings``): 1.5 GB and, per detector and
+    registration method (their sums all held at once: the methods share the passes over the
+    frames), 0.21 GB of partial sums of whole frames for a 256-pixel camera (``cog``), or
+    :data:`SUBPIXEL_SUMS_FRACTION` of that for a sub-pixel method."""
     pixels = (settings["case_config"]["camera"]["n_pixels"] / 256) ** 2
-    return 1.5e9 + 0.21e9 * pixels * len(settings["detectors"]) * len(registrations(settings))
+    methods = sum(1.0 if name == "cog" else SUBPIXEL_SUMS_FRACTION for name in registrations(settings))
+    return 1.5e9 + 0.21e9 * pixels * len(settings["detectors"]) * methods
 
 
 def mem_mb(estimate_bytes: float, measured_mb: int = 0, margin: float = MARGIN) -> int:
