@@ -265,6 +265,18 @@ def turbulent_frames(n_frames: int, n_pixels: int, seed: int) -> np.ndarray:
     return imager.image(phases), imager.diffraction_limited_peak
 
 
+def test_the_declared_memory_of_a_subpixel_method_is_its_vector():
+    """``resources.SUBPIXEL_SUMS_FRACTION`` (written out, so that parsing the workflow loads no
+    FFT code) is a sub-pixel method's vector (``lucky.cropped``) over a whole frame, for the
+    4.2 m camera (256 pixels over 5"): the lucky jobs' declared memory follows the layout."""
+    from luckyao.lucky.cropped import CroppedFrames, crop_px
+    from luckyao.study.resources import SUBPIXEL_SUMS_FRACTION
+
+    n, scale = 256, 5.0 / 256
+    vector, = CroppedFrames(n, crop_px(n, scale), EncircledEnergy(n), 1.0, scale).item_shape
+    assert SUBPIXEL_SUMS_FRACTION == vector / n**2
+
+
 def test_the_subpixel_methods_crop_scores_the_whole_frames_integrated_images():
     """A sub-pixel method adds each registered frame's central 1.25" (``lucky.cropped``), a
     periodic crop moved by its sub-pixel remainder, with the whole frame's encircled energy and

@@ -48,8 +48,10 @@ CALIBRATION = {name: calibration_spec(STUDY, case) for name, case in CASES.items
 CALIBRATION_BY_KEY = {calibration_key(s): s for s in CALIBRATION.values() if s is not None}
 LGS_TWIN = {name: lgs_twin(STUDY, CASES, name) for name in CASES}
 SLOPES = {name: slopes_spec(STUDY, case) for name, case in CASES.items()}
+SLOPES_BY_KEY = {slopes_key(s): s for s in SLOPES.values() if s is not None}
 SLOPES_CASES = {}
-"""The AO cases whose simulations replay each LGS slopes product, by its key."""
+"""The AO cases whose simulations replay each LGS slopes product, by its key (the first one's
+calibration and memory estimate serve the product: they share its LGS chain)."""
 for _name, _spec in SLOPES.items():
     if _spec is not None:
         SLOPES_CASES.setdefault(slopes_key(_spec), []).append(_name)

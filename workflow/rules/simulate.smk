@@ -3,14 +3,14 @@ rule lgs_slopes:
     differ only in their AO or targets (config.slopes_spec: GLAO, LTAO, another DM, a field):
     the sensor is open loop, so their simulations replay the same slopes."""
     input:
-        screens=lambda w: f"results/turbulence/{SLOPES[SLOPES_CASES[w.skey][0]]['screens']}.npy",
-        screens_metadata=lambda w: f"results/turbulence/{SLOPES[SLOPES_CASES[w.skey][0]]['screens']}.nc",
+        screens=lambda w: f"results/turbulence/{SLOPES_BY_KEY[w.skey]['screens']}.npy",
+        screens_metadata=lambda w: f"results/turbulence/{SLOPES_BY_KEY[w.skey]['screens']}.nc",
         calibration=lambda w: calibration_file(SLOPES_CASES[w.skey][0]),
         code=step_sources("lgs_slopes"),
     output:
         "results/slopes/{skey}.nc",  # kept, as the screens: a temporary one made again would rerun every case replaying it
     params:
-        spec=lambda w: canonical_json(SLOPES[SLOPES_CASES[w.skey][0]]),
+        spec=lambda w: canonical_json(SLOPES_BY_KEY[w.skey]),
         calibration=lambda w, input: ["--calibration", input.calibration] if input.calibration else [],
     threads: 1
     priority: lambda w: slopes_priority(w.skey)

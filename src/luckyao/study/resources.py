@@ -128,7 +128,8 @@ def simulate_memory_bytes(case: dict) -> float:
 SUBPIXEL_SUMS_FRACTION = (64**2 + 4357 + 1) / 256**2
 """A sub-pixel method's partial sums over a whole frame's (:mod:`luckyao.lucky.cropped`: a 1.25"
 crop, the encircled energy's 4,357 radial sums and the flux per frame, for the 4.2 m camera's
-5"; at 8.2 m the radial sums are a smaller part)."""
+5"; at 8.2 m the radial sums are a smaller part). Written out, so that parsing the workflow loads
+no FFT code; tests/test_registration.py checks it against the layout."""
 
 
 def lucky_memory_bytes(settings: dict) -> float:

@@ -15,14 +15,9 @@ def lgs_rms_nm(reconstructor: np.ndarray, slopes_rad: np.ndarray) -> np.ndarray:
     ``reconstructor`` from :func:`target_reconstructor` (tilt removed);
     ``slopes_rad`` (..., n_beacons, 2, n_valid), one per WFS exposure.
     """
-    return _reconstructed_rms_nm(reconstructor.T, slopes_rad)
-
-
-def _reconstructed_rms_nm(reconstructor_t: np.ndarray, slopes_rad: np.ndarray) -> np.ndarray:
-    """:func:`lgs_rms_nm` given the reconstructor's transpose ``reconstructor_t`` (slope, point)."""
     flat = np.asarray(slopes_rad, dtype=np.float32)
     flat = flat.reshape(*flat.shape[:-3], -1)
-    opd = flat @ reconstructor_t
+    opd = flat @ reconstructor.T
     return np.sqrt(np.mean(opd**2, axis=-1)) * 1e9
 
 
@@ -51,4 +46,4 @@ class LgsRmsEstimator:
         """Each target's reconstructed tilt-removed rms [nm] (n_targets, ...) from
         slopes (..., n_beacons, 2, n_valid): a frame's exposures in one call read
         the reconstructors once."""
-        return np.array([_reconstructed_rms_nm(r, slopes) for r in self._transposed])
+        return np.array([lgs_rms_nm(r.T, slopes) for r in self._transposed])  # r.T.T: r itself
