@@ -11,7 +11,8 @@ import pytest
 import luckyao
 from luckyao.simd import LANES, transpose
 
-INLINED = {"optics/propagation.py": ("optics/taps.py", "simd.py"), "wfs/kernels.py": ("simd.py",)}
+INLINED = {"optics/propagation.py": ("optics/taps.py", "simd.py"), "wfs/kernels.py": ("simd.py",),
+           "lucky/kernels.py": ("simd.py",)}
 """Files of cached kernels -> the files of the intrinsics those kernels inline."""
 
 

@@ -1,5 +1,5 @@
 """LLVM IR helpers for numba intrinsics that work on ``LANES`` float32 at once, and two such
-intrinsics: :func:`fmuladd`, :func:`transpose`.
+intrinsics: :func:`fmuladd` (also of float64), :func:`transpose`.
 
 Numba's LLVM leaves a loop scalar when its loads are indexed
 (``values[index[k]]``: it cannot bound them for its run-time alias checks),
@@ -93,15 +93,18 @@ def fmuladd_vector(builder, a, b, c):
 
 @intrinsic
 def fmuladd(typingctx, a, b, c):
-    """``a b + c`` of float32 (jit only), fused where the target has FMA: states which product
-    of a sum of products is fused, which contraction leaves to the code generator."""
-    if not all(x == types.float32 for x in (a, b, c)):
-        raise TypingError("fmuladd: float32 only")
+    """``a b + c`` of float32 or float64 (all three the same; jit only), fused where the target has
+    FMA: states which product of a sum of products is fused, which contraction leaves to the code
+    generator."""
+    kinds = {types.float32: ("f32", F32), types.float64: ("f64", ir.DoubleType())}
+    if a not in kinds or not a == b == c:
+        raise TypingError("fmuladd: three float32 or three float64")
+    name, result = kinds[a]
 
     def codegen(context, builder, signature, args):
-        return call(builder, "llvm.fmuladd.f32", F32, list(args))
+        return call(builder, f"llvm.fmuladd.{name}", result, list(args))
 
-    return types.float32(a, b, c), codegen
+    return a(a, b, c), codegen
 
 
 @intrinsic

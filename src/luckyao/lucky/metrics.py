@@ -244,14 +244,12 @@ class EncircledEnergy:
         which = np.arange(len(images)) if which is None else np.asarray(which)
         centres = np.ascontiguousarray(np.asarray(centres_px, dtype=np.float64)[which])
         sums = np.empty((len(which), centres.shape[1], self.n_bins))
-        binned = np.empty((self.n_bins, centres.shape[1]))
         for out, j, about in zip(sums, which, centres):
             if spectra is None:
                 np.copyto(frame, images[j], casting="same_kind")
                 fft.execute()
             radial_energies(spectrum if spectra is None else spectra.spectrum(j), about, fy, fx, row_end, bin_of,
-                            weight, binned)
-            out[:] = binned.T
+                            weight, out)
         return sums
 
     def energies_of(self, radial_sums: np.ndarray) -> np.ndarray:
