@@ -1,9 +1,5 @@
 """Image metrics against theory: Airy pattern with central obscuration, Gaussians, Marechal."""
 
-import os
-import subprocess
-import sys
-
 import numpy as np
 import pytest
 from scipy import integrate, optimize, special
@@ -246,32 +242,6 @@ def test_radial_sums_of_a_centre_are_the_same_alone_or_among_others():
     many = ee.radial_sums_about(image, centres)[0]
     for m in (1, 3, kernels.RADIAL_CENTRES_INNER - 1, kernels.RADIAL_CENTRES_INNER):
         np.testing.assert_array_equal(ee.radial_sums_about(image, centres[:, :m])[0], many[:m])
-
-
-_CACHE_SCRIPT = """
-import sys
-import numpy as np
-from luckyao.lucky import kernels
-from luckyao.lucky.metrics import EncircledEnergy
-ee = EncircledEnergy(64)
-image = np.random.default_rng(9).random((1, 64, 64)).astype(np.float32)
-centres = np.random.default_rng(10).uniform(20, 44, (1, 2 * kernels.RADIAL_CENTRES_INNER, 2))
-sums = [ee.radial_sums_about(image, centres[:, :m]) for m in (3, 2 * kernels.RADIAL_CENTRES_INNER)]
-sums.append(ee.energies_binned(image, centres[:, 0]))
-sys.stdout.write(b"".join(s.tobytes() for s in sums).hex())
-"""
-
-
-def test_radial_sums_are_the_same_compiled_here_or_loaded_from_numbas_cache(tmp_path):
-    """The encircled-energy kernels give the same bits in the process that compiles them as in
-    one that loads them from numba's cache (a kernel's callee compiled apart, as ``_phases`` once
-    was, can be optimised differently in the two: a fresh clone's first job then differed from the
-    next ones at 1e-14 in every sub-pixel method's d50)."""
-    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path)}
-    runs = [subprocess.run([sys.executable, "-c", _CACHE_SCRIPT], env=env, capture_output=True, text=True,
-                           check=True).stdout for _ in range(2)]
-    assert any(tmp_path.rglob("*.nbc")), "the first run wrote no cache"
-    assert runs[0] and runs[0] == runs[1]
 
 
 @pytest.mark.parametrize("shape, up", [((32, 32), 4), ((33, 31), 3), ((16, 21), 5), ((64, 48), 16), ((7, 8), 2)])

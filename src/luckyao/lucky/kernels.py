@@ -4,14 +4,14 @@ per-frame sums fused, binned encircled energy and recentred accumulation.
 Random streams (:func:`detect_frames`): every frame has its own, keyed by
 ``(seed, key, frame index)`` through splitmix64 (Steele, Lea & Flood 2014) into the
 states of xoshiro256++ generators (Blackman & Vigna 2021): ``LANES`` interleaved
-ones for the Gaussian read noise (a lane loop that vectorises) and one for the rest
+ones for the Gaussian read noise (stepped as one vector) and one for the rest
 (photons, the ziggurat's rare slow path). A frame's draws therefore depend on the
 seed, the detector's key and the frame's index only: not on the chunking, the other
 frames or the other detectors.
 
 Gaussian deviates: the ziggurat method (Marsaglia & Tsang 2000) with 256 layers and
 23-bit magnitudes in float32, numpy's ``standard_normal(dtype=float32)`` algorithm:
-the rectangle test runs for all pixels in a vectorised loop, the rare rest
+the rectangle test runs for 16 pixels at once (:mod:`.stream_vectors`), the rare rest
 (wedges and the tail) per deviate.
 
 Poisson photon counts, exact, in one of two ways (both are the same Poisson process):
@@ -30,13 +30,14 @@ import numba
 import numpy as np
 
 from ..simd import fmuladd
+from .stream_vectors import DEVIATES, GENERATORS, xoshiro_fill, ziggurat_rectangle
 
 # numba's disk cache keys a kernel by its own file: this digest of the intrinsics the kernels
 # inline makes an edit of theirs recompile them (tests/test_simd.py keeps it current)
-# intrinsics digest (simd.py): 53743260a0750b75
+# intrinsics digest (lucky/stream_vectors.py, simd.py): 77e3b6c341b47061
 
-LANES = 8
-"""Interleaved xoshiro256++ generators of the Gaussian deviates (one vector loop)."""
+LANES = GENERATORS
+"""Interleaved xoshiro256++ generators of the Gaussian deviates (one vector)."""
 
 SEARCH_PER_PIXEL = 10
 """Photons are placed by search when a frame expects fewer than n^2 / this (a search
@@ -131,16 +132,14 @@ def _uniform(s):  # pragma: no cover (jit)
     return (np.float64(_next(s) >> np.uint64(11)) + 0.5) * (1.0 / 9007199254740992.0)
 
 
-@numba.njit(cache=True, nogil=True, fastmath={"contract"})
-def _fill_bits(lanes, out):  # pragma: no cover (jit)
-    """``out`` (m,) uint64, m a multiple of LANES, from the interleaved generators."""
-    s0, s1, s2, s3 = lanes[0], lanes[1], lanes[2], lanes[3]
-    for i in range(0, out.size, LANES):
-        for lane in range(LANES):
-            out[i + lane], s0[lane], s1[lane], s2[lane], s3[lane] = _xoshiro(s0[lane], s1[lane], s2[lane], s3[lane])
-
-
 @numba.njit(cache=True, nogil=True)
+def _fill_bits(lanes, out):  # pragma: no cover (jit)
+    """``out`` (m,) uint64, m a multiple of LANES, from the interleaved generators ``lanes`` (4, LANES)
+    (value ``i`` from generator ``i % LANES``; one vector step, :func:`.stream_vectors.xoshiro_fill`)."""
+    xoshiro_fill(lanes, out)
+
+
+@numba.njit(inline="always")
 def _normal_slow(idx, x, s):  # pragma: no cover (jit)
     """The ziggurat after a failed rectangle test of layer ``idx`` with deviate ``x``:
     the wedge or tail test with fresh uniforms of ``s``, then, if rejected, new tries."""
@@ -167,28 +166,20 @@ def _normal_slow(idx, x, s):  # pragma: no cover (jit)
             break
 
 
-@numba.njit(cache=True, nogil=True, fastmath={"contract"})
-def _normals(bits32, out, s):  # pragma: no cover (jit)
-    """Standard normal float32 ``out`` (m,) from 32-bit words ``bits32`` (m,), m a multiple
-    of 8: bits 0-7 the layer, 8 the sign, 9-31 the magnitude; the rectangle test for all
-    (vector loop, int32 arithmetic, 8 at a time: ~9% of the blocks hold a failure, 1.2% a
-    deviate), the rest per deviate, in order, with the generator ``s``."""
-    block = 8
-    for start in range(0, out.size, block):
-        failed = 0
-        for i in range(start, start + block):
-            r = np.int32(bits32[i])
-            idx = r & 0xFF
-            m = (r >> 9) & 0x7FFFFF
-            x = np.float32(m) * _ZW[idx]
-            out[i] = x - np.float32(2 * ((r >> 8) & 1)) * x
-            failed += m >= _ZK32[idx]
-        if failed:
-            for i in range(start, start + block):
-                r = np.int32(bits32[i])
-                idx = r & 0xFF
-                if ((r >> 9) & 0x7FFFFF) >= _ZK32[idx]:
-                    out[i] = _normal_slow(idx, out[i], s)
+@numba.njit(cache=True, nogil=True)
+def _normals(words, out, s):  # pragma: no cover (jit)
+    """Standard normal float32 ``out`` (m,) from 32-bit words ``words`` (m,) int32, m a multiple of
+    16: bits 0-7 the layer, 8 the sign, 9-31 the magnitude; the rectangle test 16 at a time
+    (:func:`.stream_vectors.ziggurat_rectangle`: ~1.5% fail it), the rest per deviate, in order, with
+    the generator ``s`` (:func:`_normal_slow`, inlined: no fast-math flags here or there)."""
+    for start in range(0, out.size, DEVIATES):
+        failed = ziggurat_rectangle(words, start, _ZW, _ZK32, out)
+        while failed:
+            k = 0
+            while not (failed >> k) & 1:
+                k += 1
+            failed &= failed - 1
+            out[start + k] = _normal_slow(words[start + k] & 0xFF, out[start + k], s)
 
 
 @numba.njit(cache=True, nogil=True)
@@ -316,27 +307,46 @@ def _per_pixel(unit, photons, out, s):  # pragma: no cover (jit)
             out[y, x] += count
 
 
-@numba.njit(cache=True, nogil=True, fastmath=True)
+SUM_ROWS = 8
+"""Rows :func:`_finish` sums side by side (independent sums, each in its own order: latency hidden)."""
+
+
+@numba.njit(inline="always")
 def _finish(out, normals, sigma, rows, cols):  # pragma: no cover (jit)
-    """``out += sigma normals`` (if sigma > 0), then row and column sums (float64, in
-    any order) and the peak of the frame ``out`` (n, n) (finite values)."""
+    """``out += sigma normals`` (if sigma > 0; fused multiply-adds), then the row and column sums
+    (float64, each in the order of its pixels) and the peak of the frame ``out`` (n, n) (finite
+    values). No fast-math flags: the same operations inlined anywhere."""
     n = out.shape[0]
-    peak = np.float32(-np.inf)
+    high = np.full(n, -np.inf, np.float32)
     cols[:] = 0.0
-    for y in range(n):
-        o = out[y]
-        if sigma > 0:
-            g = normals[y * n: (y + 1) * n]
-            for x in range(n):
-                o[x] += sigma * g[x]
-        row = 0.0
+    for y in range(n):  # vectorised over the columns
+        o, g = out[y], normals[y * n: (y + 1) * n]
         for x in range(n):
-            v = o[x]
-            row += v
-            cols[x] += v
-            peak = max(peak, v)
-        rows[y] = row
-    return peak
+            v = fmuladd(sigma, g[x], o[x]) if sigma > 0 else o[x]
+            o[x] = v
+            cols[x] += np.float64(v)
+            if v > high[x]:
+                high[x] = v
+    whole = n - n % SUM_ROWS
+    for y0 in range(0, whole, SUM_ROWS):
+        a0 = a1 = a2 = a3 = a4 = a5 = a6 = a7 = 0.0
+        for x in range(n):
+            a0 += np.float64(out[y0, x])
+            a1 += np.float64(out[y0 + 1, x])
+            a2 += np.float64(out[y0 + 2, x])
+            a3 += np.float64(out[y0 + 3, x])
+            a4 += np.float64(out[y0 + 4, x])
+            a5 += np.float64(out[y0 + 5, x])
+            a6 += np.float64(out[y0 + 6, x])
+            a7 += np.float64(out[y0 + 7, x])
+        rows[y0], rows[y0 + 1], rows[y0 + 2], rows[y0 + 3] = a0, a1, a2, a3
+        rows[y0 + 4], rows[y0 + 5], rows[y0 + 6], rows[y0 + 7] = a4, a5, a6, a7
+    for y in range(whole, n):
+        a = 0.0
+        for x in range(n):
+            a += np.float64(out[y, x])
+        rows[y] = a
+    return high.max()
 
 
 @numba.njit(cache=True, nogil=True)
@@ -360,7 +370,7 @@ def detect_frames(unit, within, row_cumulative, photons, sigma, seed, key, first
     k, n, _ = unit.shape
     lanes = np.empty((4, LANES), np.uint64)
     s = np.empty(4, np.uint64)
-    bits32 = bits.view(np.uint32)
+    words = bits.view(np.int32)
     for j in range(k):
         if not drawn[j]:
             continue
@@ -369,7 +379,7 @@ def detect_frames(unit, within, row_cumulative, photons, sigma, seed, key, first
         frame[:] = 0.0
         if sigma > 0:
             _fill_bits(lanes, bits)
-            _normals(bits32, normals, s)
+            _normals(words, normals, s)
         if photons * row_cumulative[j, n - 1] < n * n / SEARCH_PER_PIXEL:
             _place(within[j], row_cumulative[j], photons, frame, s)
         else:

@@ -82,7 +82,7 @@ from .detector import Detector, KeyedNoise
 from .method_run import MethodRun
 from .metrics import EncircledEnergy, centroid_from_sums, strehl_from
 from .ranking import IMAGE_CRITERIA, ExternalCriterion, fraction_counts
-from .registration import COG, FrameSpectra, Registration
+from .registration import COG, FrameSpectra, Registration, empty_aligned
 from .scoring import MatchedStrehl, frame_sums
 
 Chunks = Callable[[], Iterable[tuple[int, np.ndarray]]]
@@ -204,7 +204,7 @@ class _ChunkNoise:
         k, n = unit.shape[:2]
         if self.noise is None or self.noise.max_frames < k:
             self.noise = KeyedNoise(n, max(k, 64))
-            self.buffer = np.empty((self.noise.max_frames, n, n), np.float32)
+            self.buffer = empty_aligned((self.noise.max_frames, n, n), np.float32)  # transformed in place
         return self.noise.prepare(unit)
 
 

@@ -92,9 +92,16 @@ class _Transforms:
                                     flags=("FFTW_ESTIMATE", "FFTW_DESTROY_INPUT"), threads=1)
 
     def transform(self, frame: np.ndarray, out: np.ndarray) -> None:
-        """``out`` (n, n/2 + 1) = the real FFT of ``frame``."""
+        """``out`` (n, n/2 + 1) = the real FFT of ``frame``: in place of copies where both are
+        C-contiguous and aligned as the plan's arrays (FFTW's new-array execute: the same plan, the
+        same bits), else through them."""
+        if aligned(frame) and aligned(out):
+            self.forward.update_arrays(frame, out)
+            self.forward.execute()
+            return
         self.frame[:] = frame
-        self.forward()
+        self.forward.update_arrays(self.frame, self.spectrum)
+        self.forward.execute()
         out[:] = self.spectrum
 
     def filter(self, spectrum: np.ndarray, kernel_ft: np.ndarray, out: np.ndarray) -> None:
@@ -103,6 +110,16 @@ class _Transforms:
         self.spectrum *= kernel_ft
         self.backward()  # normalised by FFTW's interface (1 / n^2)
         out[:] = self.frame
+
+
+def aligned(array: np.ndarray) -> bool:
+    """Whether ``array`` is C-contiguous and aligned as FFTW's plans here (``pyfftw.simd_alignment``)."""
+    return array.flags.c_contiguous and array.ctypes.data % pyfftw.simd_alignment == 0
+
+
+def empty_aligned(shape: tuple, dtype) -> np.ndarray:
+    """An uninitialised array aligned for FFTW's plans (:func:`aligned`, when its items are too)."""
+    return pyfftw.empty_aligned(shape, dtype=dtype)
 
 
 @lru_cache(maxsize=4)
@@ -128,7 +145,7 @@ class FrameSpectra:
         """Hold the spectra of ``frames`` (k, n, n) float32 (the previous chunk's forgotten)."""
         k, n = len(frames), frames.shape[-1]
         if self._spectra is None or len(self._spectra) < k or self._spectra.shape[1] != n:
-            self._spectra = np.empty((k, n, n // 2 + 1), np.complex64)
+            self._spectra = empty_aligned((k, n, n // 2 + 1), np.complex64)
             self._done, self._buffers, self._boxes = np.zeros(k, bool), {}, {}
         self.frames = frames
         self._done[:] = False
