@@ -152,11 +152,10 @@ def test_thresholded_centre_of_gravity_ignores_a_background():
 
 TINY = Path(__file__).parent / "data" / "tiny.yaml"
 OLD_TELEMETRY_SHA256 = "f7cab846303966da8a848346da80d00663a4a065257dcfcdd0a542e96ddc6ab8"
-"""The telemetry without calibration, with one thread (tests/conftest.py, as the workflow's jobs): the
-code of ``1055013``, whose telemetry with two threads has the digest recorded when the calibration was
-introduced from the code before it (``1f8ee428...``; the suite then ran with the cores' threads)."""
-"""Every variable of the tiny LTAO case's telemetry (0.1 s, seed 7) as the code before the
-centroiders and the calibration (d889eb8) wrote it, on this machine."""
+"""Every variable of the tiny LTAO case's telemetry (0.1 s, seed 7) without calibration, on one
+thread (tests/conftest.py, as the workflow's jobs). Recorded at ``1055013``, whose telemetry on two
+threads has the digest ``1f8ee428...`` that the code before the centroiders and the calibration
+(d889eb8) wrote when the suite still ran on the cores' threads."""
 
 
 @pytest.fixture(scope="module")

@@ -13,8 +13,8 @@ from luckyao.lucky.metrics import EncircledEnergy, centroid_px
 from luckyao.lucky.pipeline import ImageReference, run_lucky, run_lucky_methods
 from luckyao.lucky.ranking import ExternalCriterion, fraction_counts
 from luckyao.lucky.scoring import MatchedStrehl
-from luckyao.lucky.registration import (REGISTRATIONS, WINDOW_RADIUS_FWHM, Registration, fourier_shift,
-                                        gaussian_kernel, search_px, shifts_of)
+from luckyao.lucky.registration import (REGISTRATIONS, WINDOW_RADIUS_FWHM, FrameSpectra, Registration, aligned,
+                                        empty_aligned, fourier_shift, gaussian_kernel, search_px, shifts_of)
 from luckyao.optics.imaging import Camera, Imager
 from luckyao.optics.pupil import Telescope
 from reference import detect
@@ -50,6 +50,22 @@ def test_fourier_shift_conserves_flux_and_is_the_roll_for_whole_pixels():
     band_limited = fourier_shift(airy()[0][None].astype(np.float32), np.array([[0.0, 0.0]]))
     back = fourier_shift(fourier_shift(band_limited, np.array([[0.37, -0.21]])), np.array([[-0.37, 0.21]]))
     np.testing.assert_allclose(back, band_limited, atol=1e-6 * band_limited.max())
+
+
+def test_spectra_of_aligned_frames_taken_in_place_are_the_copied_ones_bit_for_bit():
+    """A frame aligned as FFTW's plans is transformed in place (FFTW's new-array execute), another
+    through the plan's own arrays: the same plan, so the same spectrum bit for bit, equal to the
+    real FFT to float32 rounding."""
+    frames = np.random.default_rng(4).random((2, N, N)).astype(np.float32)
+    on_line = empty_aligned((2, N, N), np.float32)
+    on_line[:] = frames
+    offset = empty_aligned((2 * N * N + 1,), np.float32)[1:].reshape(2, N, N)  # 4 bytes off: copied
+    offset[:] = frames
+    assert all(map(aligned, on_line)) and not any(map(aligned, offset))
+    in_place, copied = FrameSpectra(on_line), FrameSpectra(offset)
+    for j in range(2):
+        np.testing.assert_array_equal(in_place.spectrum(j).view(np.uint32), copied.spectrum(j).view(np.uint32))
+        np.testing.assert_allclose(in_place.spectrum(j), scipy.fft.rfft2(frames[j]), atol=1e-5 * N * N)
 
 
 def test_shifts_split_into_whole_pixels_and_a_remainder_exactly_today_for_cog():

@@ -34,7 +34,7 @@ from .stream_vectors import DEVIATES, GENERATORS, xoshiro_fill, ziggurat_rectang
 
 # numba's disk cache keys a kernel by its own file: this digest of the intrinsics the kernels
 # inline makes an edit of theirs recompile them (tests/test_simd.py keeps it current)
-# intrinsics digest (lucky/stream_vectors.py, simd.py): 77e3b6c341b47061
+# intrinsics digest (lucky/stream_vectors.py, simd.py): 1cbeaf29717897f1
 
 LANES = GENERATORS
 """Interleaved xoshiro256++ generators of the Gaussian deviates (one vector)."""
@@ -174,7 +174,7 @@ def _normals(words, out, s):  # pragma: no cover (jit)
     the generator ``s`` (:func:`_normal_slow`, inlined: no fast-math flags here or there)."""
     for start in range(0, out.size, DEVIATES):
         failed = ziggurat_rectangle(words, start, _ZW, _ZK32, out)
-        while failed:
+        while failed:  # each set bit, lowest first
             k = 0
             while not (failed >> k) & 1:
                 k += 1
@@ -307,15 +307,12 @@ def _per_pixel(unit, photons, out, s):  # pragma: no cover (jit)
             out[y, x] += count
 
 
-SUM_ROWS = 8
-"""Rows :func:`_finish` sums side by side (independent sums, each in its own order: latency hidden)."""
-
-
 @numba.njit(inline="always")
 def _finish(out, normals, sigma, rows, cols):  # pragma: no cover (jit)
     """``out += sigma normals`` (if sigma > 0; fused multiply-adds), then the row and column sums
-    (float64, each in the order of its pixels) and the peak of the frame ``out`` (n, n) (finite
-    values). No fast-math flags: the same operations inlined anywhere."""
+    (float64, each in the order of its pixels: the rows eight side by side, independent sums that
+    hide each other's latency) and the peak of the frame ``out`` (n, n) (finite values). No fast-math
+    flags: the same operations inlined anywhere."""
     n = out.shape[0]
     high = np.full(n, -np.inf, np.float32)
     cols[:] = 0.0
@@ -327,8 +324,8 @@ def _finish(out, normals, sigma, rows, cols):  # pragma: no cover (jit)
             cols[x] += np.float64(v)
             if v > high[x]:
                 high[x] = v
-    whole = n - n % SUM_ROWS
-    for y0 in range(0, whole, SUM_ROWS):
+    whole = n - n % 8
+    for y0 in range(0, whole, 8):
         a0 = a1 = a2 = a3 = a4 = a5 = a6 = a7 = 0.0
         for x in range(n):
             a0 += np.float64(out[y0, x])

@@ -102,6 +102,7 @@ def ziggurat_rectangle(typingctx, words, start, widths, limits, out):
         width = _gather(builder, widths_.data, layer, simd.F32)
         limit = _gather(builder, limits_.data, layer, _I32)
         x = builder.fmul(builder.sitofp(magnitude, simd.VECTOR), width)
+        # x - 2 sign x, as the scalar code (not a negation: m = 0 gives +0 either sign)
         twice = builder.sitofp(builder.shl(sign, _vector(1, _WORDS)), simd.VECTOR)
         simd.store(builder, builder.fsub(x, builder.fmul(twice, x)), builder.gep(out_.data, [first]), every)
         failed = builder.icmp_signed(">=", magnitude, limit)
