@@ -293,6 +293,32 @@ def test_the_declared_memory_of_a_subpixel_method_is_its_vector():
     assert SUBPIXEL_SUMS_FRACTION == vector / n**2
 
 
+def test_the_vectors_are_added_to_their_rows_in_frame_order_bit_for_bit():
+    """``kernels.add_rows`` (tiled over the vector's elements) gives each row exactly the sums of
+    adding the frames' vectors one after another, in frame order (float64 addition is not
+    associative, so any other order would differ): vectors longer than a tile and not a multiple
+    of it, frames in no row (-1), a row taking several frames, and frames taken out (sign -1)."""
+    from luckyao.lucky import kernels
+
+    rng = np.random.default_rng(5)
+    k, m, n_rows = 40, 1301, 9
+    vectors = rng.standard_normal((k, m)) * 10.0 ** rng.uniform(-8, 8, (k, m))
+    rows = np.stack([rng.permutation(n_rows)[:3] for _ in range(k)])
+    rows[rng.random(rows.shape) < 0.2] = -1
+    start = rng.standard_normal((n_rows, m + 8))
+    for sign in (1.0, -1.0):
+        expected = start.copy()
+        for j in range(k):
+            for r in rows[j][rows[j] >= 0]:
+                expected[r, :m] += sign * vectors[j]
+        partial = start.copy()
+        kernels.add_rows(vectors, rows, partial, sign)
+        assert np.array_equal(partial, expected)
+        reordered = start.copy()
+        kernels.add_rows(vectors[::-1].copy(), rows[::-1].copy(), reordered, sign)
+        assert not np.array_equal(reordered, expected)  # the order is what is tested
+
+
 def test_the_subpixel_methods_crop_scores_the_whole_frames_integrated_images():
     """A sub-pixel method adds each registered frame's central 1.25" (``lucky.cropped``), a
     periodic crop moved by its sub-pixel remainder, with the whole frame's encircled energy and

@@ -464,17 +464,26 @@ def phase_ramps(spectra, shifts):  # pragma: no cover (jit)
 @numba.njit(cache=True, nogil=True)
 def add_rows(vectors, rows, partial, sign):  # pragma: no cover (jit)
     """``partial[r, :m] += sign vectors[j]`` (float64) for every ``r = rows[j, c] >= 0``;
-    ``vectors`` (k, m) float64, ``rows`` (k, c) int64, ``partial`` (R, >= m) float64."""
+    ``vectors`` (k, m) float64, ``rows`` (k, c) int64, ``partial`` (R, >= m) float64.
+
+    Element-tile major: ``tile`` elements of every row the chunk's frames touch stay in cache
+    while each frame in turn is added to them (a run's partial sums are far larger than the
+    cache); each element still receives the frames in their order: the same sums bit for bit
+    as frame by frame (11 rows a frame, sums far larger than the cache: 0.6 of the time).
+    """
     k, m = vectors.shape
-    for j in range(k):
-        v = vectors[j]
-        for c in range(rows.shape[1]):
-            r = rows[j, c]
-            if r < 0:
-                continue
-            to = partial[r]
-            for x in range(m):
-                to[x] += sign * v[x]
+    tile = 512
+    for x0 in range(0, m, tile):
+        x1 = min(x0 + tile, m)
+        for j in range(k):
+            v = vectors[j, x0:x1]
+            for c in range(rows.shape[1]):
+                r = rows[j, c]
+                if r < 0:
+                    continue
+                to = partial[r, x0:x1]
+                for x in range(x1 - x0):
+                    to[x] += sign * v[x]
 
 
 @numba.njit(cache=True, nogil=True)
