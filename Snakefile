@@ -1,7 +1,7 @@
 # luckyao: every figure of the study from one command.
 #   snakemake                                    # the default (quick) study, config/config.yaml
 #   snakemake --configfile config/paper.yaml     # paper fidelity: an overlay of what differs
-# The study config is validated (src/luckyao/study/config.schema.yaml) before any job runs.
+# The study config is validated (src/luckyao/studyspec/schema.yaml) before any job runs.
 
 configfile: "config/config.yaml"
 

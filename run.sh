@@ -37,8 +37,8 @@ case "$command" in
         # After a hard kill Snakemake keeps its lock and jobs leave *.partial files: both
         # are cleared when no run of the workflow uses the study folder (this one, or -d /
         # --directory in any form): every Snakemake of the workflow holds a lock on it
-        # (src/luckyao/study/live_run.py), however started. Then Snakemake runs.
-        exec "$VENV/bin/python" -m luckyao.study.live_run "$@"
+        # (src/luckyao/jobs/live_run.py), however started. Then Snakemake runs.
+        exec "$VENV/bin/python" -m luckyao.jobs.live_run "$@"
         ;;
     test)
         setup

@@ -22,8 +22,8 @@ from pathlib import Path  # noqa: E402
 
 from luckyao.ao.control import command_matrix, dm_slopes_matrix  # noqa: E402
 from luckyao.ao.dm import DeformableMirror  # noqa: E402
-from luckyao.study.case import telescope_from, tomography_from  # noqa: E402
-from luckyao.study.config import load_study  # noqa: E402
+from luckyao.studyspec.case import telescope_from, tomography_from  # noqa: E402
+from luckyao.studyspec.study import load_study  # noqa: E402
 from luckyao.tomography.reconstructor import factorize  # noqa: E402
 from luckyao.tomography.slopes import SlopeGeometry, slope_covariance  # noqa: E402
 from luckyao.wfs.beacons import LgsConfig  # noqa: E402

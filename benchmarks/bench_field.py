@@ -33,10 +33,12 @@ import numpy as np  # noqa: E402
 sys.path.insert(0, str(Path(__file__).parent))
 from bench_step import products  # noqa: E402
 
-from luckyao.study.case import Case  # noqa: E402
-from luckyao.study.config import imaged_targets, load_study, turbulence_spec  # noqa: E402
-from luckyao.study.simulation import Replay, lgs_chain, simulate  # noqa: E402
-from luckyao.study.turbulence import read_screens, write_screens  # noqa: E402
+from luckyao.studyspec.case import Case  # noqa: E402
+from luckyao.studyspec.resolved import imaged_targets
+from luckyao.studyspec.study import load_study
+from luckyao.studyspec.products import turbulence_spec  # noqa: E402
+from luckyao.steps.simulation import Replay, lgs_chain, simulate  # noqa: E402
+from luckyao.steps.screens import read_screens, write_screens  # noqa: E402
 
 N_STEPS = 600
 SINGLE, FIELD = "ltao_r0_13.5cm", "ltao_field"

@@ -12,11 +12,11 @@ of the default AO case.
 Run: .venv/bin/python benchmarks/bench_step.py [config.yaml]
 
 Telescope size (``--diameters 2.5 4.2 8.2``): for each diameter, the default AO case at that
-size (its WFS, DM, obscuration and camera derived, study/scaling.py), each measured in fresh
+size (its WFS, DM, obscuration and camera derived, studyspec/scaling.py), each measured in fresh
 processes so their peak memory is their own: the reconstructor and the command matrix (build
 time, peak RSS), then the whole time loop (ms per step, median of ``--repeats`` runs, with
 its peak RSS: the products loaded, the screens of the steps, a block of frames), and the
-files a case of the default duration writes (the study's estimates, study/resources.py).
+files a case of the default duration writes (the study's estimates, jobs/resources.py).
 Printed as a table and one JSON line per diameter (``size {...}``); then each quantity's fitted
 power law a D^b with its value at 39 m, and the study's own file-size estimates at 39 m.
 """
@@ -42,14 +42,15 @@ from luckyao.ao.correction import OpenLoopCorrection  # noqa: E402
 from luckyao.optics.imaging import Imager  # noqa: E402
 from luckyao.optics.propagation import Propagator  # noqa: E402
 from luckyao.optics.pupil import TiltRemover  # noqa: E402
-from luckyao.study.case import Case  # noqa: E402
-from luckyao.study.calibration import build_calibration  # noqa: E402
-from luckyao.study.config import (calibration_spec, commands_spec, deep_merge, load_study,  # noqa: E402
-                                  reconstructor_spec, turbulence_spec, validate_study)
-from luckyao.study.reconstructor import build_commands, build_reconstructors  # noqa: E402
-from luckyao.study.resources import commands_bytes, frames_bytes, reconstructor_bytes, screens_bytes  # noqa: E402
-from luckyao.study.simulation import lgs_chain, simulate  # noqa: E402
-from luckyao.study.turbulence import read_screens, write_screens  # noqa: E402
+from luckyao.studyspec.case import Case  # noqa: E402
+from luckyao.steps.calibration import build_calibration  # noqa: E402
+from luckyao.studyspec.products import calibration_spec, commands_spec, reconstructor_spec, turbulence_spec
+from luckyao.studyspec.schema import deep_merge
+from luckyao.studyspec.study import load_study, validate_study
+from luckyao.steps.reconstructor import build_commands, build_reconstructors  # noqa: E402
+from luckyao.jobs.resources import commands_bytes, frames_bytes, reconstructor_bytes, screens_bytes  # noqa: E402
+from luckyao.steps.simulation import lgs_chain, simulate  # noqa: E402
+from luckyao.steps.screens import read_screens, write_screens  # noqa: E402
 from luckyao.units import REFERENCE_WAVELENGTH_M  # noqa: E402
 
 N_STEPS = 800

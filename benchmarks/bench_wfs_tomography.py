@@ -24,8 +24,8 @@ from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from luckyao.study.case import telescope_from, tomography_from  # noqa: E402
-from luckyao.study.config import load_study  # noqa: E402
+from luckyao.studyspec.case import telescope_from, tomography_from  # noqa: E402
+from luckyao.studyspec.study import load_study  # noqa: E402
 from luckyao.tomography.criterion import lgs_rms_nm  # noqa: E402
 from luckyao.tomography.reconstructor import factorize, pupil_points, target_reconstructor  # noqa: E402
 from luckyao.tomography.slopes import SlopeGeometry, slope_covariance  # noqa: E402

@@ -16,7 +16,7 @@ out = Path(sys.argv[1] if len(sys.argv) > 1 else "tutorial-output")
 out.mkdir(parents=True, exist_ok=True)
 
 # 1. A study config: the default study's (every key is described in
-#    src/luckyao/study/config.schema.yaml). For a quick look, half a second of telescope
+#    src/luckyao/studyspec/schema.yaml). For a quick look, half a second of telescope
 #    time (50 lucky frames of 10 ms) and screens made for just that.
 study = luckyao.load_study("config/config.yaml")
 study["turbulence"].update(duration_s=0.5, min_along_m=30.0)

@@ -23,12 +23,14 @@ import pytest
 
 from luckyao.atmosphere.screens import ScreenSet, strip_screen
 from luckyao.optics.imaging import Imager
-from luckyao.study import simulation
-from luckyao.study.case import Case
-from luckyao.study.config import commands_spec, deep_merge, load_study, reconstructor_spec, turbulence_spec
-from luckyao.study.reconstructor import build_commands, build_reconstructors
-from luckyao.study.simulation import lgs_chain, simulate
-from luckyao.study.turbulence import TurbulenceSpec, strip_specs
+from luckyao.steps import simulation
+from luckyao.studyspec.case import Case
+from luckyao.studyspec.products import commands_spec, reconstructor_spec, turbulence_spec
+from luckyao.studyspec.schema import deep_merge
+from luckyao.studyspec.study import load_study
+from luckyao.steps.reconstructor import build_commands, build_reconstructors
+from luckyao.steps.simulation import lgs_chain, simulate
+from luckyao.steps.screens import TurbulenceSpec, strip_specs
 from luckyao.tomography.reconstructor import pupil_points
 from luckyao.units import REFERENCE_WAVELENGTH_M
 from luckyao.wfs.sensor import LgsSensor
@@ -207,9 +209,9 @@ def test_no_ao_case_takes_its_lgs_telemetry_from_its_twin(nine, study, tmp_path)
     same LGS chain (``config.lgs_twin``: the sensor is open loop, it never sees the DM) and
     only image: its telemetry and frames are then bit-identical to measuring them itself.
     The twin's file is refused when its LGS chain differs (here a 16x16 WFS) or its seed."""
-    from luckyao.study.config import lgs_twin
-    from luckyao.study.datasets import provenance, write_dataset
-    from luckyao.study.simulation import twin_lgs_rms_nm
+    from luckyao.studyspec.products import lgs_twin
+    from luckyao.io.datasets import provenance, write_dataset
+    from luckyao.steps.simulation import twin_lgs_rms_nm
 
     config, cases = study
     assert lgs_twin(config, cases, "noao_r0_15cm") == "ltao_r0_15cm"
@@ -242,9 +244,9 @@ def test_ao_cases_replay_the_slopes_their_lgs_chain_measured_once(nine, study, t
     share one LGS slopes product (``config.slopes_spec``: the sensor is open loop); an AO
     simulation replaying it gives telemetry and frames bit-identical to measuring the slopes
     in its own loop. The product is refused for another LGS chain (a 16x16 WFS) or seed."""
-    from luckyao.study.config import lgs_chain_config, slopes_key, slopes_spec
-    from luckyao.study.datasets import provenance, write_dataset
-    from luckyao.study.lgs_slopes import RecordedSlopes, measure_lgs_slopes
+    from luckyao.studyspec.products import lgs_chain_config, slopes_key, slopes_spec
+    from luckyao.io.datasets import provenance, write_dataset
+    from luckyao.steps.lgs_slopes import RecordedSlopes, measure_lgs_slopes
     from luckyao.tomography.criterion import LgsRmsEstimator
 
     config, cases = study

@@ -7,9 +7,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from luckyao.study.config import load_study, validate_study
-from luckyao.study.figures import FIGURE_KINDS, FigureSettings
-from luckyao.study.sweeps import expand_sweeps, sweep_points
+from luckyao.studyspec.study import load_study, validate_study
+from luckyao.figures import FIGURE_KINDS, FigureSettings
+from luckyao.studyspec.sweeps import expand_sweeps, sweep_points
 from synthetic import lucky_dataset
 
 CONFIG = Path(__file__).resolve().parents[1] / "config"

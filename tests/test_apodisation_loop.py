@@ -5,12 +5,13 @@ import numpy as np
 import pytest
 
 from luckyao.atmosphere.screens import ScreenSet, strip_screen
-from luckyao.study.case import Case
-from luckyao.study.config import (ConfigError, commands_spec, deep_merge, load_study, reconstructor_spec,
-                                  turbulence_spec, validate_study)
-from luckyao.study.reconstructor import build_commands, build_reconstructors
-from luckyao.study.simulation import Replay, lgs_chain, simulate
-from luckyao.study.turbulence import TurbulenceSpec, strip_specs
+from luckyao.studyspec.case import Case
+from luckyao.studyspec.schema import ConfigError, deep_merge
+from luckyao.studyspec.products import commands_spec, reconstructor_spec, turbulence_spec
+from luckyao.studyspec.study import load_study, validate_study
+from luckyao.steps.reconstructor import build_commands, build_reconstructors
+from luckyao.steps.simulation import Replay, lgs_chain, simulate
+from luckyao.steps.screens import TurbulenceSpec, strip_specs
 
 DURATION_S = 0.3  # 30 lucky frames
 

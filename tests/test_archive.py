@@ -19,10 +19,10 @@ import pytest
 import xarray as xr
 import yaml
 
-from luckyao.study.archive import CHECKSUMS, checksum_list, read_members, runtime_packages, write_members
-from luckyao.study.cli import main
-from luckyao.study.config import validate_study
-from luckyao.study.verify import MEMBER_LIMIT_BYTES, compare_variables
+from luckyao.archive.create import CHECKSUMS, checksum_list, read_members, runtime_packages, write_members
+from luckyao.cli import main
+from luckyao.studyspec.study import validate_study
+from luckyao.archive.verify import MEMBER_LIMIT_BYTES, compare_variables
 
 REPO = Path(__file__).resolve().parents[1]
 TINY = REPO / "tests" / "data" / "tiny.yaml"
@@ -250,7 +250,7 @@ def test_verify_reads_a_tar_bomb_in_bounded_memory(tmp_path):
         info = tarfile.TarInfo("bomb/results/cases/good/lucky.nc")
         info.size = size
         tar.addfile(info, io.BufferedReader(Zeros(size)))
-    script = ("import resource, sys; from luckyao.study.cli import main; import luckyao.study.verify; "
+    script = ("import resource, sys; from luckyao.cli import main; import luckyao.archive.verify; "
               "before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss; code = main(['verify', sys.argv[1]]); "
               "print(code, resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - before)")
     result = subprocess.run([sys.executable, "-c", script, str(bomb)], capture_output=True, text=True, timeout=300)

@@ -128,7 +128,7 @@ def test_screens_made_layers_at_once_are_the_same_numbers(tmp_path):
     """``write_screens(threads=3)`` makes layers concurrently (largest first): each layer still
     draws from its own ``default_rng([seed, layer])``, so the file is byte for byte that of one
     thread, and each layer is ``strip_screen`` of its own stream."""
-    from luckyao.study.turbulence import TurbulenceSpec, read_screens, strip_specs, write_screens
+    from luckyao.steps.screens import TurbulenceSpec, read_screens, strip_specs, write_screens
 
     spec = {"seed": 5, "duration_s": 0.5, "max_pixel_m": 0.05, "field_radius_arcsec": 10, "min_along_m": 20.0,
             "min_across_m": 4.0, "time_step_s": 0.0025, "diameter_m": 1.0, "outer_scale_m": L0_M,

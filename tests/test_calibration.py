@@ -10,12 +10,13 @@ import yaml
 
 from luckyao.atmosphere.screens import ScreenSet, periodic_screen_amplitude, periodic_screen_pair, strip_screen
 from luckyao.optics.pupil import Telescope
-from luckyao.study import calibration as calibration_product
-from luckyao.study.case import Case
-from luckyao.study.config import calibration_spec, commands_spec, deep_merge, reconstructor_spec, turbulence_spec
-from luckyao.study.reconstructor import build_commands, build_reconstructors
-from luckyao.study.simulation import lgs_chain, simulate
-from luckyao.study.turbulence import TurbulenceSpec, strip_specs
+from luckyao.steps import calibration as calibration_product
+from luckyao.studyspec.case import Case
+from luckyao.studyspec.products import calibration_spec, commands_spec, reconstructor_spec, turbulence_spec
+from luckyao.studyspec.schema import deep_merge
+from luckyao.steps.reconstructor import build_commands, build_reconstructors
+from luckyao.steps.simulation import lgs_chain, simulate
+from luckyao.steps.screens import TurbulenceSpec, strip_specs
 from luckyao.units import ARCSEC_RAD, REFERENCE_WAVELENGTH_M
 from luckyao.wfs import shack_hartmann as sh
 from luckyao.wfs.beacons import LgsConfig

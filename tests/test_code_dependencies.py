@@ -1,7 +1,7 @@
 """The workflow reruns exactly the steps whose code changed (and what follows them).
 
 Each rule's code inputs are the import closure of the module its step runs
-(``luckyao.study.code_deps``). Here a copy of the workflow and package runs a
+(``luckyao.jobs.code_deps``). Here a copy of the workflow and package runs a
 tiny study; then one module at a time gets a real content edit, and a dry run
 must plan exactly the steps that depend on it, by what each step computes.
 """
@@ -26,9 +26,9 @@ EXPECTED = {
     "optics/farfield.py": {"simulate", "lucky", "figure", "export"},
     "wfs/kernels.py": {"simulate", "lucky", "figure", "export"},
     "lucky/metrics.py": {"lucky", "figure", "export"},
-    "study/figures/quality.py": {"figure"},
+    "figures/quality.py": {"figure"},
     "optics/long_exposure.py": {"figure"},
-    "study/export.py": {"export"},
+    "io/fits.py": {"export"},
 }
 
 
@@ -122,11 +122,11 @@ def test_a_name_imported_from_a_package_depends_on_the_module_that_defines_it(tm
     """Packages re-export their public objects lazily (``luckyao.exports``): importing a package
     imports none of its modules, so the closure of ``from luckyao.lucky import run_lucky`` holds
     ``lucky/pipeline.py`` (followed through ``EXPORTS``) and not the package's other modules."""
-    from luckyao.study.code_deps import PACKAGE_ROOT, import_closure
+    from luckyao.jobs.code_deps import PACKAGE_ROOT, import_closure
 
     copy = tmp_path / "luckyao"
     shutil.copytree(PACKAGE_ROOT, copy, ignore=shutil.ignore_patterns("__pycache__"))
     (copy / "user.py").write_text("from luckyao.lucky import run_lucky\nfrom luckyao.optics import Imager\n")
     files = {str(p.relative_to(copy)) for p in import_closure("luckyao.user", copy)}
     assert {"lucky/pipeline.py", "lucky/__init__.py", "optics/imaging.py"} <= files
-    assert "optics/long_exposure.py" not in files and "study/figures.py" not in files
+    assert "optics/long_exposure.py" not in files and "figures.py" not in files

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from luckyao.study.config import sha256
-from luckyao.study.datasets import FrameWriter, iter_frame_blocks, open_dataset, provenance, write_dataset
+from luckyao.io.hashing import sha256
+from luckyao.io.datasets import FrameWriter, iter_frame_blocks, open_dataset, provenance, write_dataset
 
 
 def test_provenance_carries_config_hash_version_and_seed():
@@ -98,7 +98,7 @@ def test_a_failed_write_names_the_file_and_what_limits_it(tmp_path):
     """A file over the size limit (``ulimit -f``): the error names the file, the bytes written
     and the limit, not only netCDF's "HDF error"; nothing is left."""
     script = ("import resource, signal, sys, numpy as np, xarray as xr\n"
-              "from luckyao.study.datasets import write_dataset\n"
+              "from luckyao.io.datasets import write_dataset\n"
               "signal.signal(signal.SIGXFSZ, signal.SIG_IGN)\n"
               "resource.setrlimit(resource.RLIMIT_FSIZE, (200_000, resource.RLIM_INFINITY))\n"
               "try:\n"

@@ -125,14 +125,14 @@ def test_fitting_error_scales_as_pitch_to_the_five_thirds(fitting_errors):
 
 
 def test_fitting_error_at_the_orders_of_each_diameter(fitting_errors):
-    """The DMs the study derives for 2.5 m and 8.2 m at a 0.525 m pitch (study/scaling.py):
+    """The DMs the study derives for 2.5 m and 8.2 m at a 0.525 m pitch (studyspec/scaling.py):
     6x6 (d = 0.5 m) and 17x17 (d = 0.5125 m), obscuration 2/7 D. sigma^2 = kappa (d/r0)^(5/3)
     with kappa independent of the pitch: the 17x17 on 8.2 m is the 17x17 on 4.2 m scaled by
     1.95 (same geometry, the same random numbers), so its kappa equals the 4.2 m one but for
     the fixed 20 m outer scale (< 1 %; measured 0.2089 against 0.2096, ratio 0.997); the 6x6 has a wider edge band
     than 9x9 and a narrower one than 5x5, so its kappa lies between theirs, below the lattice
     value at its pitch (measured 0.167 between 0.164 and 0.186, lattice 0.237)."""
-    from luckyao.study.scaling import subapertures_across
+    from luckyao.studyspec.scaling import subapertures_across
 
     means = {n: values.mean() for n, values in fitting_errors.items()}
     orders = {}

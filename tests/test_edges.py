@@ -10,8 +10,8 @@ import pytest
 import yaml
 from docutils.core import publish_parts
 
-from luckyao.study.config import validate_study
-from luckyao.study.report import figure_caption, rst_text
+from luckyao.studyspec.study import validate_study
+from luckyao.jobs.report import figure_caption, rst_text
 
 TINY = Path(__file__).resolve().parent / "data" / "tiny.yaml"
 HOSTILE = ["<script>alert(1)</script>", "x``\n\n.. raw:: html\n\n   <script>alert(2)</script>\n\n``",

@@ -24,10 +24,10 @@ from luckyao.lucky.accumulation import batch_mean_error
 from luckyao.lucky.detector import Detector
 from luckyao.lucky.pipeline import run_lucky
 from luckyao.optics.imaging import Imager
-from luckyao.study.case import Case
-from luckyao.study.config import deep_merge
-from luckyao.study.simulation import simulate
-from luckyao.study.turbulence import TurbulenceSpec, strip_specs
+from luckyao.studyspec.case import Case
+from luckyao.studyspec.schema import deep_merge
+from luckyao.steps.simulation import simulate
+from luckyao.steps.screens import TurbulenceSpec, strip_specs
 
 N_SEEDS = 12
 N_BLOCKS = 5
@@ -91,7 +91,7 @@ def test_lucky_image_errors_from_time_blocks_match_the_spread_over_seeds(seeds, 
 
 def test_value_with_error_keeps_two_significant_digits_of_the_error():
     """The README table's ``value ± error``: an error below 0.001 is not printed as 0.000."""
-    from luckyao.study.figures import value_with_error
+    from luckyao.figures import value_with_error
 
     assert value_with_error(0.005213, 0.000123) == "0.00521 ± 0.00012"
     assert value_with_error(0.2201, 0.0031) == "0.2201 ± 0.0031"

@@ -3,7 +3,7 @@
 import numpy as np
 from astropy.io import fits
 
-from luckyao.study.export import _hdu
+from luckyao.io.fits import _hdu
 
 
 def test_a_nan_metric_is_written_as_an_undefined_card_and_reads_back(tmp_path):

@@ -15,18 +15,14 @@ from luckyao.lucky.detector import Detector
 from luckyao.lucky.metrics import strehl
 from luckyao.lucky.accumulation import recentring_shifts_px
 from luckyao.lucky.pipeline import ImageReference, run_lucky
-from luckyao.study.case import Case
-from luckyao.study.config import (
-    commands_spec,
-    deep_merge,
-    imaged_targets,
-    load_study,
-    reconstructor_spec,
-    turbulence_spec,
-)
-from luckyao.study.reconstructor import build_commands, build_reconstructors
-from luckyao.study.simulation import Replay, lgs_chain, simulate
-from luckyao.study.turbulence import TurbulenceSpec, strip_specs
+from luckyao.studyspec.case import Case
+from luckyao.studyspec.products import commands_spec, reconstructor_spec, turbulence_spec
+from luckyao.studyspec.schema import deep_merge
+from luckyao.studyspec.resolved import imaged_targets
+from luckyao.studyspec.study import load_study
+from luckyao.steps.reconstructor import build_commands, build_reconstructors
+from luckyao.steps.simulation import Replay, lgs_chain, simulate
+from luckyao.steps.screens import TurbulenceSpec, strip_specs
 from reference import shift_frames
 
 DURATION_S = 0.4

@@ -7,9 +7,10 @@ import numpy as np
 import pytest
 import yaml
 
-from luckyao.study.config import ConfigError, validate_study
-from luckyao.study.datasets import FrameWriter
-from luckyao.study.turbulence import read_screens, write_screens
+from luckyao.studyspec.schema import ConfigError
+from luckyao.studyspec.study import validate_study
+from luckyao.io.datasets import FrameWriter
+from luckyao.steps.screens import read_screens, write_screens
 from luckyao.wfs.kernels import centroids
 
 TINY = Path(__file__).parent / "data" / "tiny.yaml"

@@ -3,11 +3,13 @@
 import numpy as np
 
 from luckyao.atmosphere.screens import ScreenSet, strip_screen
-from luckyao.study.case import Case
-from luckyao.study.config import deep_merge, load_study, reconstructor_spec, turbulence_spec
-from luckyao.study.reconstructor import build_reconstructors
-from luckyao.study.simulation import lgs_chain, simulate
-from luckyao.study.turbulence import TurbulenceSpec, strip_specs
+from luckyao.studyspec.case import Case
+from luckyao.studyspec.schema import deep_merge
+from luckyao.studyspec.study import load_study
+from luckyao.studyspec.products import reconstructor_spec, turbulence_spec
+from luckyao.steps.reconstructor import build_reconstructors
+from luckyao.steps.simulation import lgs_chain, simulate
+from luckyao.steps.screens import TurbulenceSpec, strip_specs
 
 
 def test_lgs_rms_correlates_with_the_true_rms():

@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 import yaml
 
-from luckyao.study.live_run import study_folder
+from luckyao.jobs.live_run import study_folder
 
 REPO = Path(__file__).resolve().parents[1]
 TINY = REPO / "tests" / "data" / "tiny.yaml"

@@ -11,10 +11,11 @@ from luckyao.atmosphere.screens import ScreenSet, strip_screen
 from luckyao.lucky.accumulation import batch_mean_error
 from luckyao.optics.imaging import Imager
 from luckyao.optics.long_exposure import long_exposure_strehl
-from luckyao.study.case import Case
-from luckyao.study.config import deep_merge, load_study, validate_study
-from luckyao.study.simulation import simulate
-from luckyao.study.turbulence import TurbulenceSpec, strip_specs
+from luckyao.studyspec.case import Case
+from luckyao.studyspec.schema import deep_merge
+from luckyao.studyspec.study import load_study, validate_study
+from luckyao.steps.simulation import simulate
+from luckyao.steps.screens import TurbulenceSpec, strip_specs
 
 # A 1 m telescope and three fast layers, so 20 s of frozen flow cross ~150 outer
 # scales: the Monte-Carlo error of the long exposure is a few percent.
@@ -62,7 +63,7 @@ nearly independent (lag-1 correlation of the axis value 0.08 at 8.2 m; 0.54 at 0
 
 def sized_case(diameter_m: float, n_steps: int) -> dict:
     """The default study's no-AO system at ``diameter_m`` (its size-dependent keys derived,
-    study/scaling.py): one ground layer at r0 = 13.5 cm moving D/4 per step."""
+    studyspec/scaling.py): one ground layer at r0 = 13.5 cm moving D/4 per step."""
     speed_m_s = diameter_m / STEPS_PER_DIAMETER / 0.0025
     config = load_study(CONFIG)[0]
     config["cases"] = {"sized": {

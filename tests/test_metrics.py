@@ -296,11 +296,11 @@ def test_component_and_dilation_kernels_match_scipy():
 
 @pytest.mark.parametrize("diameter_m", [2.5, 8.2, 10.4])
 def test_airy_metrics_at_the_sampling_derived_for_each_diameter(diameter_m):
-    """The lucky camera and pupil the study derives for each telescope size (study/scaling.py:
+    """The lucky camera and pupil the study derives for each telescope size (studyspec/scaling.py:
     obscuration 2/7 D, about 2 pixels per lambda/D at 800 nm over 5", pupil samples of
     lambda / 5" = 3.3 cm, 76 to 316 across): unit Strehl, and the FWHM and d50 of the
     obscured Airy pattern (eps = obscuration / D) to the 0.5 % of the pupil's sampled area."""
-    from luckyao.study.scaling import camera_pixels
+    from luckyao.studyspec.scaling import camera_pixels
 
     obscuration_m = round(2 / 7 * diameter_m, 3)
     n_pixels = camera_pixels(diameter_m, 800e-9, 5.0, 2.0)

@@ -5,7 +5,8 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from luckyao.study.config import lucky_settings, sweep_detectors, validate_study
+from luckyao.studyspec.lucky import lucky_settings, sweep_detectors
+from luckyao.studyspec.study import validate_study
 
 TINY = Path(__file__).parent / "data" / "tiny.yaml"
 

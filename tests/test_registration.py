@@ -286,7 +286,7 @@ def test_the_declared_memory_of_a_subpixel_method_is_its_vector():
     FFT code) is a sub-pixel method's vector (``lucky.cropped``) over a whole frame, for the
     4.2 m camera (256 pixels over 5"): the lucky jobs' declared memory follows the layout."""
     from luckyao.lucky.cropped import CroppedFrames, crop_px
-    from luckyao.study.resources import SUBPIXEL_SUMS_FRACTION
+    from luckyao.jobs.resources import SUBPIXEL_SUMS_FRACTION
 
     n, scale = 256, 5.0 / 256
     vector, = CroppedFrames(n, crop_px(n, scale), EncircledEnergy(n), 1.0, scale).item_shape
@@ -388,7 +388,7 @@ def test_knees_interpolate_the_crossing_in_log_signal_and_magnitudes_follow_the_
     photons per frame follows F_0 dlambda A T t / (h c / lambda) (I = 15: ~870 photons)."""
     import xarray as xr
 
-    from luckyao.study.figures.registration import i_magnitude, knees, photons_per_frame
+    from luckyao.figures.registration import i_magnitude, knees, photons_per_frame
 
     signal = np.array([10.0, 100.0, 1000.0, 10000.0])
     dims = ("case", "signal")

@@ -13,9 +13,9 @@ from luckyao.atmosphere.screens import ScreenSet, strip_screen
 from luckyao.lucky.detector import Detector
 from luckyao.lucky.pipeline import run_lucky
 from luckyao.optics.imaging import Imager
-from luckyao.study.case import Case
-from luckyao.study.simulation import simulate
-from luckyao.study.turbulence import TurbulenceSpec, strip_specs
+from luckyao.studyspec.case import Case
+from luckyao.steps.simulation import simulate
+from luckyao.steps.screens import TurbulenceSpec, strip_specs
 
 CASE = yaml.safe_load((Path(__file__).parent / "data" / "tiny.yaml").read_text())["base"]
 """0.2 s, 4.2 m telescope, two layers at 0 and 5 km, no LGS, 64-pixel camera."""

@@ -1,5 +1,5 @@
 """Telescope size as a study axis: the size-dependent keys derived from the diameter
-(study/scaling.py), the default study unchanged, and inconsistent input refused by key."""
+(studyspec/scaling.py), the default study unchanged, and inconsistent input refused by key."""
 
 import copy
 from pathlib import Path
@@ -8,8 +8,10 @@ import pytest
 import yaml
 
 from luckyao.optics.imaging import Imager
-from luckyao.study.case import Case
-from luckyao.study.config import ConfigError, load_study, turbulence_spec, validate_study
+from luckyao.studyspec.case import Case
+from luckyao.studyspec.schema import ConfigError
+from luckyao.studyspec.study import load_study, validate_study
+from luckyao.studyspec.products import turbulence_spec
 from luckyao.units import ARCSEC_RAD
 
 CONFIG = Path(__file__).resolve().parents[1] / "config" / "config.yaml"

@@ -6,7 +6,8 @@ import numpy as np
 
 from luckyao.lucky import kernels
 from luckyao.seeds import detector_key, screen_rng, target_seed, wfs_noise_rng
-from luckyao.study.config import load_study, lucky_settings
+from luckyao.studyspec.study import load_study
+from luckyao.studyspec.lucky import lucky_settings
 
 
 def _first_draws(rng: np.random.Generator) -> tuple:

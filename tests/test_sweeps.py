@@ -7,8 +7,9 @@ from pathlib import Path
 import pytest
 import yaml
 
-from luckyao.study.config import ConfigError, plausibility_warnings, unused_cases, validate_study
-from luckyao.study.sweeps import CASE_NAME, expand_sweeps, sweep_points
+from luckyao.studyspec.schema import ConfigError
+from luckyao.studyspec.study import plausibility_warnings, unused_cases, validate_study
+from luckyao.studyspec.sweeps import CASE_NAME, expand_sweeps, sweep_points
 
 TINY = Path(__file__).resolve().parent / "data" / "tiny.yaml"
 

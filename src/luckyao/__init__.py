@@ -7,7 +7,6 @@ The Python interface (``luckyao.api``, loaded on first use): ``open_case``,
 
 import importlib
 import os
-from importlib.metadata import PackageNotFoundError, version
 
 # OpenBLAS picks its kernels by the CPU it finds, and kernels of different CPUs round
 # differently (matrix products: the reconstructors, the encircled energies): the same config
@@ -16,10 +15,7 @@ from importlib.metadata import PackageNotFoundError, version
 # the workflow's jobs set it in their environment).
 os.environ.setdefault("OPENBLAS_CORETYPE", "Haswell")
 
-try:
-    __version__ = version("luckyao")
-except PackageNotFoundError:  # running from a source tree without installation
-    __version__ = "0+unknown"
+from .version import __version__  # noqa: E402  (after the BLAS pinning: numpy must not load first)
 
 _API = ("open_case", "open_telemetry", "open_figure", "draw", "load_study", "run_case", "export_fits")
 __all__ = ["__version__", *_API]
@@ -27,7 +23,7 @@ __all__ = ["__version__", *_API]
 
 def __getattr__(name: str):
     # Loaded on first use, by name: every workflow step imports this package, and neither
-    # its start-up nor its code inputs (study/code_deps.py follows import statements)
+    # its start-up nor its code inputs (jobs/code_deps.py follows import statements)
     # should include the interface, which no step uses.
     if name in _API:
         return getattr(importlib.import_module("luckyao.api"), name)

@@ -24,7 +24,9 @@ from pathlib import Path
 
 import xarray as xr
 
-from .study.config import SIGNAL_KINDS, ConfigError, load_study as _load_study, validate_study
+from .studyspec.lucky import SIGNAL_KINDS
+from .studyspec.schema import ConfigError
+from .studyspec.study import load_study as _load_study, validate_study
 
 __all__ = ["open_case", "open_telemetry", "open_figure", "draw", "load_study", "run_case", "export_fits"]
 
@@ -32,14 +34,14 @@ __all__ = ["open_case", "open_telemetry", "open_figure", "draw", "load_study", "
 def load_study(*paths) -> dict:
     """A study config from YAML files (later ones merged over earlier ones, sweeps
     expanded), validated; raises ``ConfigError`` naming the key."""
-    from .study.sweeps import expand_sweeps
+    from .studyspec.sweeps import expand_sweeps
 
     study, _ = _load_study(*paths)
     return expand_sweeps(study)
 
 
 def _open(path: Path, what: str) -> xr.Dataset:
-    from .study.datasets import open_dataset
+    from .io.datasets import open_dataset
 
     return open_dataset(path, what)
 
@@ -65,7 +67,7 @@ def open_figure(fig_id: str, study_dir=".") -> xr.Dataset:
 def draw(data: xr.Dataset, title: str | None = None):
     """The matplotlib Figure of a figure's dataset (:func:`open_figure`), drawn as the
     workflow draws it."""
-    from .study.figures import FIGURE_KINDS
+    from .figures import FIGURE_KINDS
 
     settings = json.loads(data.attrs["config_json"])
     return FIGURE_KINDS[settings["kind"]][1](data, title or str(data.attrs.get("title", "")).split()[-1])
@@ -73,7 +75,7 @@ def draw(data: xr.Dataset, title: str | None = None):
 
 def export_fits(lucky_path, out_path, detectors=None) -> int:
     """A case's images as FITS (see ``luckyao export``); returns the number of images."""
-    from .study.export import export_fits as export
+    from .io.fits import export_fits as export
 
     return export(lucky_path, out_path, detectors)
 
@@ -100,9 +102,10 @@ def run_case(study: dict, case, name: str = "explore", workdir=None) -> xr.Datas
     study's cases, or a dict of overrides of its ``base`` (then called ``name``). The files
     go to ``workdir`` (kept), by default to a temporary folder removed afterwards. Keep
     ``turbulence.duration_s`` short for exploration: the screens are made for all of it."""
-    from .study.config import (calibration_key, calibration_spec, canonical_json, commands_key, commands_spec,
-                               lucky_settings, reconstructor_key, reconstructor_spec, turbulence_key,
-                               turbulence_spec)
+    from .studyspec.products import (calibration_key, calibration_spec, commands_key, commands_spec, reconstructor_key,
+                                reconstructor_spec, turbulence_key, turbulence_spec)
+    from .io.hashing import canonical_json
+    from .studyspec.lucky import lucky_settings
 
     study = copy.deepcopy(study)
     if isinstance(case, dict):

@@ -3,7 +3,7 @@
 Each subpackage's ``__init__.py`` names its public objects by module (``EXPORTS``) and
 re-exports them from here: ``from luckyao.lucky import run_lucky`` works, yet importing a
 package imports none of its modules. So a module's import closure (which is a workflow
-step's code inputs, :mod:`luckyao.study.code_deps`) holds only the modules it names, and
+step's code inputs, :mod:`luckyao.jobs.code_deps`) holds only the modules it names, and
 ``code_deps`` follows a name imported from a package to the module ``EXPORTS`` gives.
 """
 

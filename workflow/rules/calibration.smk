@@ -2,7 +2,7 @@ rule calibration:
     """The WFS slope response (push-pull dithers through the sensor model), shared by every
     case with the same sensor, estimator and mean seeing."""
     input:
-        code=step_sources("calibration"),
+        code=step_sources("luckyao.steps.calibration"),
     output:
         "results/calibrations/{wkey}.nc",
     params:

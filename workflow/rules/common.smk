@@ -4,18 +4,21 @@ import re
 import shlex
 import sys
 
-from luckyao.study.code_deps import step_sources
-from luckyao.study.datasets import atomic_path
-from luckyao.study.live_run import hold_shared
-from luckyao.study.resources import (commands_memory_bytes, lucky_memory_bytes, machine_memory_bytes, mem_mb,
+from luckyao.jobs.code_deps import step_sources
+from luckyao.io.datasets import atomic_path
+from luckyao.jobs.live_run import hold_shared
+from luckyao.jobs.resources import (commands_memory_bytes, lucky_memory_bytes, machine_memory_bytes, mem_mb,
                                      preflight, reconstructor_memory_bytes, simulate_memory_bytes,
                                      slopes_memory_bytes, turbulence_memory_bytes)
-from luckyao.study.config import (ConfigError, calibration_key, calibration_spec, canonical_json, commands_key,
-                                  commands_spec, imaged_targets, lgs_twin, lucky_settings, plausibility_warnings,
-                                  reconstructor_key, reconstructor_spec, sha256, SIGNAL_KINDS, slopes_key, slopes_spec,
-                                  sweep_detectors,
-                                  turbulence_key, turbulence_spec, unused_cases, validate_study)
-from luckyao.study.sweeps import expand_sweeps, sweep_points
+from luckyao.io.hashing import canonical_json, sha256
+from luckyao.studyspec.lucky import SIGNAL_KINDS, lucky_settings, sweep_detectors
+from luckyao.studyspec.products import (calibration_key, calibration_spec, commands_key, commands_spec, lgs_twin,
+                                   reconstructor_key, reconstructor_spec, slopes_key, slopes_spec, turbulence_key,
+                                   turbulence_spec)
+from luckyao.studyspec.resolved import imaged_targets
+from luckyao.studyspec.schema import ConfigError
+from luckyao.studyspec.study import plausibility_warnings, unused_cases, validate_study
+from luckyao.studyspec.sweeps import expand_sweeps, sweep_points
 
 RUN_LOCK = hold_shared()  # this study folder is in use until this Snakemake exits (run.sh cleans up only when free)
 
@@ -25,7 +28,7 @@ try:
 except ConfigError as err:
     sys.exit("\n".join(f"luckyao: invalid study config: {problem}" for problem in str(err).splitlines()))
 # Before any job: every job's memory within this machine's (or --resources mem_mb=N, e.g. a
-# cluster's nodes), every file it writes within the free disk (src/luckyao/study/resources.py).
+# cluster's nodes), every file it writes within the free disk (src/luckyao/jobs/resources.py).
 GIVEN_MEM_MB = getattr(workflow.global_resources.get("mem_mb"), "value", None)  # a snakemake Resource
 MEMORY_LIMIT_BYTES = max(machine_memory_bytes(), 1e6 * GIVEN_MEM_MB if isinstance(GIVEN_MEM_MB, (int, float)) else 0)
 if problems := preflight(STUDY, CASES, memory_bytes=MEMORY_LIMIT_BYTES):
@@ -124,7 +127,7 @@ DRAWN_CASES = sorted({c for fig in STUDY["figures"] for c in STUDY["figures"][fi
 
 def figure_caption_rst(fig):
     """The report caption of a figure (config text escaped: no markup from names)."""
-    from luckyao.study.report import figure_caption
+    from luckyao.jobs.report import figure_caption
 
     return figure_caption(fig, STUDY["figures"][fig], STUDY, CASES)
 

@@ -26,7 +26,7 @@ rule figure:
     input:
         settings=lambda w: FIGURE_SETTINGS[w.fig],
         lucky=lambda w: figure_inputs(w.fig),
-        code=step_sources("figures"),
+        code=step_sources("luckyao.figures"),
     output:
         pdf="figures/{fig}.pdf",
         png="figures/{fig}.png",
@@ -55,7 +55,7 @@ rule export:
     """A case's integrated and long-exposure images as FITS (one image extension each)."""
     input:
         lucky="results/cases/{case}/lucky.nc",
-        code=step_sources("export"),
+        code=step_sources("luckyao.io.fits"),
     output:
         "fits/{case}.fits",
     threads: 1

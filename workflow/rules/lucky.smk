@@ -4,7 +4,7 @@ rule lucky:
         frames="results/cases/{case}/frames.nc",
         telemetry="results/cases/{case}/telemetry.nc",
         replay=lambda w: replay_screens(w.case),
-        code=step_sources("postprocess"),
+        code=step_sources("luckyao.steps.postprocess"),
     output:
         "results/cases/{case}/lucky.nc",
     params:

@@ -1,7 +1,7 @@
 rule reconstructor:
     """MAP tomographic reconstructors, shared by every case with the same geometry and prior."""
     input:
-        code=step_sources("reconstructor"),
+        code=step_sources("luckyao.steps.reconstructor"),
     output:
         "results/reconstructors/{rkey}.nc",
     params:
@@ -23,7 +23,7 @@ rule reconstructor:
 rule commands:
     """AO command matrices (LTAO or GLAO) and DM slopes, shared by every case with the same system."""
     input:
-        code=step_sources("reconstructor"),
+        code=step_sources("luckyao.steps.reconstructor"),
     output:
         "results/commands/{ckey}.nc",
     params:

@@ -6,7 +6,7 @@ rule lgs_slopes:
         screens=lambda w: f"results/turbulence/{SLOPES_BY_KEY[w.skey]['screens']}.npy",
         screens_metadata=lambda w: f"results/turbulence/{SLOPES_BY_KEY[w.skey]['screens']}.nc",
         calibration=lambda w: calibration_file(SLOPES_CASES[w.skey][0]),
-        code=step_sources("lgs_slopes"),
+        code=step_sources("luckyao.steps.lgs_slopes"),
     output:
         "results/slopes/{skey}.nc",  # kept, as the screens: a temporary one made again would rerun every case replaying it
     params:
@@ -42,7 +42,7 @@ rule simulate:
         # params and inputs too
         slopes=lambda w: ancient(slopes_file(w.case)) if SLOPES[w.case] else [],
         lgs_twin=lambda w: ancient(f"results/cases/{LGS_TWIN[w.case]}/telemetry.nc") if LGS_TWIN[w.case] else [],
-        code=step_sources("simulation"),
+        code=step_sources("luckyao.steps.simulation"),
     output:
         frames=frames_output("results/cases/{case}/frames.nc"),
         telemetry="results/cases/{case}/telemetry.nc",

@@ -1,7 +1,7 @@
 rule turbulence:
     """Normalised phase screens shared by every case with the same turbulence spec."""
     input:
-        code=step_sources("turbulence"),
+        code=step_sources("luckyao.steps.screens"),
     output:
         screens="results/turbulence/{key}.npy",
         metadata="results/turbulence/{key}.nc",

@@ -1,0 +1,1 @@
+"""A finished study packed with its code, config and environment, and verified by rerunning."""

@@ -1,0 +1,377 @@
+"""Command-line interface: one subcommand per workflow step.
+
+    luckyao check CONFIG [OVERLAY ...]
+    luckyao turbulence --spec JSON --screens S.npy --metadata S.nc
+    luckyao simulate --case JSON --name NAME --seed N --screens S.npy --screens-metadata S.nc
+                     [--reconstructor R.nc] [--commands C.nc] [--calibration W.nc] [--lgs-telemetry T.nc]
+                     --frames F --telemetry T
+    luckyao reconstructor --spec JSON --out R.nc
+    luckyao calibration --spec JSON --out W.nc
+    luckyao commands --spec JSON --out C.nc
+    luckyao lucky --settings JSON --frames F --telemetry T --out lucky.nc [--screens S.npy --screens-metadata S.nc]
+    luckyao figure --id ID (--settings JSON | --settings-file S.json) --out-prefix figures/ID  lucky.nc ...
+    luckyao export lucky.nc --out images.fits [--detector NAME ...]
+    luckyao table figures/longexp.nc
+    luckyao knees figures/registration.nc [--fraction F] [--criterion C] [--read-noise R]
+    luckyao archive [--study-dir DIR] [--configfile OVERLAY ...] [--out A.tar]
+    luckyao verify A.tar [--case NAME | --all-cases] [--workdir DIR] [--rtol R] [--atol A] [--no-rerun]
+    luckyao lock [--out requirements.lock]
+"""
+
+import argparse
+import json
+import logging
+import os
+import signal
+import sys
+import time
+
+
+def _setup_logging() -> None:
+    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(levelname)s %(message)s",
+                        stream=sys.stderr)
+
+
+def cmd_check(args) -> int:
+    """One line: valid, or one line per problem naming its key (no traceback)."""
+    from .studyspec.schema import ConfigError
+    from .studyspec.study import load_study, plausibility_warnings, unused_cases
+
+    try:
+        study, cases = load_study(*args.config)
+    except ConfigError as err:
+        for problem in str(err).splitlines():
+            print(f"{' + '.join(args.config)}: {problem}", file=sys.stderr)
+        return 1
+    for warning in plausibility_warnings(cases):
+        print(f"{' + '.join(args.config)}: warning: {warning}", file=sys.stderr)
+    from .studyspec.sweeps import expand_sweeps
+
+    unused = unused_cases(expand_sweeps(study))
+    if unused:
+        print(f"{' + '.join(args.config)}: warning: no figure shows the cases {', '.join(unused)}", file=sys.stderr)
+    print(f"{' + '.join(args.config)}: valid, {len(cases)} cases")
+    return 0
+
+
+def cmd_turbulence(args) -> None:
+    from .io.datasets import provenance
+    from .steps.screens import write_screens
+
+    spec = json.loads(args.spec)
+    write_screens(spec, args.screens, args.metadata, provenance("luckyao normalised phase screens", spec, spec["seed"]),
+                  threads=args.threads)
+
+
+def cmd_simulate(args) -> None:
+    from .studyspec.case import Case
+    from .studyspec.resolved import imaged_targets
+    from .io.datasets import FrameWriter, open_dataset, provenance, write_dataset
+    from .steps.lgs_slopes import RecordedSlopes
+    from .steps.simulation import lgs_chain, simulate, twin_lgs_rms_nm
+    from .tomography.criterion import LgsRmsEstimator
+    from .steps.screens import read_screens
+
+    config = json.loads(args.case)
+    case = Case.from_config(config)
+    screens = read_screens(args.screens, args.screens_metadata)
+    sensor = estimator = None
+    if args.reconstructor:
+        reconstructors = open_dataset(args.reconstructor, "reconstructor", allow_nan=())["reconstructor"].values
+    if args.slopes:  # an AO case: its LGS slopes measured by their product job
+        sensor = RecordedSlopes.open(args.slopes, config, args.seed)
+        estimator = LgsRmsEstimator(reconstructors, sensor.n_slopes)
+    elif args.reconstructor:
+        calibration = (open_dataset(args.calibration, "WFS calibration", allow_nan=()) if args.calibration
+                       else None)
+        sensor, estimator = lgs_chain(case, screens, reconstructors, args.seed, calibration)
+    lgs_rms_nm = twin_lgs_rms_nm(args.lgs_telemetry, config, args.seed) if args.lgs_telemetry else None
+    commands = None
+    if args.commands:
+        products = open_dataset(args.commands, "AO command", allow_nan=())
+        commands = products["command_matrix"].values, products["dm_slopes"].values
+    attrs = provenance(f"luckyao frames of case {args.name}", config, args.seed)
+    imaged = imaged_targets(config)
+    start = time.perf_counter()
+    with FrameWriter(args.frames, imaged, case.n_frames, case.camera.n_pixels,
+                     case.camera.pixel_scale_arcsec, attrs) as writer:
+        telemetry = simulate(case, screens, writer.write, sensor, estimator, commands, imaged,
+                             lgs_rms_nm=lgs_rms_nm)
+    elapsed = time.perf_counter() - start
+    steps = case.n_frames * case.steps_per_frame
+    logging.getLogger(__name__).info("simulated %d steps in %.1f s: %.3f ms per step (with I/O)",
+                                     steps, elapsed, 1e3 * elapsed / steps)
+    telemetry.attrs.update(provenance(f"luckyao telemetry of case {args.name}", config, args.seed))
+    telemetry.attrs["case"] = args.name
+    write_dataset(telemetry, args.telemetry, allow_nan={"axis_strehl"} if len(imaged) < len(case.targets) else ())
+
+
+def cmd_slopes(args) -> None:
+    from .io.datasets import open_dataset, provenance, write_dataset
+    from .steps.lgs_slopes import measure_lgs_slopes
+    from .steps.screens import read_screens
+
+    spec = json.loads(args.spec)
+    calibration = open_dataset(args.calibration, "WFS calibration", allow_nan=()) if args.calibration else None
+    ds = measure_lgs_slopes(spec, read_screens(args.screens, args.screens_metadata), calibration)
+    ds.attrs.update(provenance("luckyao LGS slopes", spec, spec["seed"]))
+    write_dataset(ds, args.out, compress=False)
+
+
+def cmd_reconstructor(args) -> None:
+    from .io.datasets import provenance, write_dataset
+    from .steps.reconstructor import build_reconstructors
+
+    spec = json.loads(args.spec)
+    ds = build_reconstructors(spec)
+    ds.attrs.update(provenance("luckyao tomographic reconstructors", spec, 0))
+    write_dataset(ds, args.out, compress=False)
+
+
+def cmd_commands(args) -> None:
+    from .io.datasets import provenance, write_dataset
+    from .steps.reconstructor import build_commands
+
+    spec = json.loads(args.spec)
+    ds = build_commands(spec)
+    ds.attrs.update(provenance("luckyao AO command matrix", spec, 0))
+    write_dataset(ds, args.out, compress=False)
+
+
+def cmd_calibration(args) -> None:
+    from .steps.calibration import build_calibration
+    from .io.datasets import provenance, write_dataset
+
+    spec = json.loads(args.spec)
+    ds = build_calibration(spec)
+    ds.attrs.update(provenance("luckyao WFS slope-response calibration", spec, spec["seed"]))
+    write_dataset(ds, args.out, compress=False)
+
+
+def cmd_lucky(args) -> None:
+    from .steps.postprocess import lucky_case
+
+    lucky_case(json.loads(args.settings), args.frames, args.telemetry, args.out, args.screens,
+               args.screens_metadata)
+
+
+def cmd_figure(args) -> None:
+    from .figures import draw_figure
+
+    if args.settings_file:
+        with open(args.settings_file) as f:
+            settings = json.load(f)
+    else:
+        settings = json.loads(args.settings)
+    draw_figure(args.id, settings, args.inputs, args.out_prefix)
+
+
+def cmd_export(args) -> None:
+    from .io.fits import export_fits
+
+    n = export_fits(args.lucky, args.out, args.detector)
+    logging.getLogger(__name__).info("wrote %s: %d images", args.out, n)
+
+
+def cmd_table(args) -> None:
+    from .io.datasets import open_dataset
+    from .figures import long_exposure_markdown
+
+    data = open_dataset(args.data, "long_exposure_table figure data", remake=False)
+    if "best_lucky_strehl" not in data:
+        raise ValueError(f"'{args.data}' is not a long_exposure_table figure's data (it has no best_lucky_strehl); "
+                         "give one such as figures/longexp.nc")
+    sys.stdout.write(long_exposure_markdown(data))
+
+
+def cmd_knees(args) -> None:
+    from .io.datasets import open_dataset
+    from .figures.registration import knee_markdown
+
+    data = open_dataset(args.data, "registration figure data", remake=False)
+    if "strehl_knee_photons" not in data:
+        raise ValueError(f"'{args.data}' is not a registration figure's data (it has no strehl_knee_photons); "
+                         "give one such as figures/registration.nc")
+    fraction = float(data.fraction.values[0]) if args.fraction is None else args.fraction
+    for key, value, coord in (("--fraction", fraction, "fraction"), ("--criterion", args.criterion, "criterion"),
+                              ("--read-noise", args.read_noise, "read_noise")):
+        if value not in data[coord].values:
+            raise ValueError(f"{key} {value}: '{args.data}' has {list(data[coord].values)}")
+    sys.stdout.write(f"Knees at {100 * fraction:g} % of frames, selection by {args.criterion}, read noise "
+                     f"{args.read_noise:g} e-: the signal from which the integrated Strehl keeps 90 % of its "
+                     "noiseless value and d50 stays within 10 % of it (I magnitude: "
+                     f"{float(data.attrs['i_zero_photons_per_frame']):.3g} photons per frame at I = 0)\n\n")
+    sys.stdout.write(knee_markdown(data, fraction, args.criterion, args.read_noise) + "\n")
+
+
+def cmd_archive(args) -> int:
+    """One tar file of a finished study; problems one line each (no traceback)."""
+    from .archive.create import archive
+
+    try:
+        archive(args.study_dir, args.configfile, args.out)
+    except ValueError as err:  # ConfigError, ArchiveError
+        for problem in str(err).splitlines():
+            print(f"luckyao archive: {problem}", file=sys.stderr)
+        return 1
+    return 0
+
+
+def cmd_verify(args) -> int:
+    """0 when the archive's checksums and the rerun case agree, else 1 naming what differs."""
+    from .archive.verify import verify
+
+    try:
+        agrees = verify(args.archive, args.case, args.workdir, args.rtol, args.atol, args.cores, args.snakefile,
+                        rerun=not args.no_rerun, all_cases=args.all_cases)
+    except ValueError as err:
+        print(f"luckyao verify: FAILED: {err}", file=sys.stderr)
+        return 1
+    return 0 if agrees else 1
+
+
+def cmd_lock(args) -> None:
+    from .archive.create import requirements_lock
+
+    text = requirements_lock()
+    if args.out:
+        with open(args.out, "w") as f:
+            f.write(text)
+    else:
+        sys.stdout.write(text)
+
+
+def main(argv=None) -> int:
+    """Run one subcommand; a failure is one line naming the file or key (no traceback;
+    ``LUCKYAO_TRACEBACK=1`` shows it)."""
+    args = build_parser().parse_args(argv)
+    _setup_logging()
+    signal.signal(signal.SIGXFSZ, signal.SIG_IGN)  # a file over the size limit: a named write error, not a kill
+    try:
+        return args.func(args) or 0
+    except (ValueError, OSError, KeyError, RuntimeError) as err:
+        if os.environ.get("LUCKYAO_TRACEBACK"):
+            raise
+        message = f"missing {err}" if isinstance(err, KeyError) else str(err)
+        detail = f" ({type(err).__name__})" if isinstance(err, (OSError, KeyError)) else ""
+        print(f"luckyao {args.command}: error{detail}: {message}", file=sys.stderr)
+        return 1
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="luckyao", description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    sub = parser.add_subparsers(dest="command", required=True)
+
+    p = sub.add_parser("check", help="validate a study config (later files are merged over earlier ones)")
+    p.add_argument("config", nargs="+")
+    p.set_defaults(func=cmd_check)
+
+    p = sub.add_parser("turbulence", help="generate the shared normalised phase screens")
+    p.add_argument("--spec", required=True, help="turbulence spec as JSON")
+    p.add_argument("--screens", required=True, help="flat .npy of the screens")
+    p.add_argument("--metadata", required=True, help="netCDF description of the screens")
+    p.add_argument("--threads", type=int, default=1, help="layers made at once (the same numbers for any)")
+    p.set_defaults(func=cmd_turbulence)
+
+    p = sub.add_parser("simulate", help="run one case's time loop")
+    p.add_argument("--case", required=True, help="resolved case config as JSON")
+    p.add_argument("--name", required=True)
+    p.add_argument("--seed", type=int, required=True)
+    p.add_argument("--screens", required=True)
+    p.add_argument("--screens-metadata", required=True)
+    p.add_argument("--reconstructor", default="", help="reconstructor file (cases with LGS)")
+    p.add_argument("--commands", default="", help="AO command-matrix file (cases with AO)")
+    p.add_argument("--calibration", default="", help="WFS calibration file (cases with wfs.calibration)")
+    p.add_argument("--lgs-telemetry", default="",
+                   help="telemetry of the AO case that measured this no-AO case's LGS rms (studyspec.products.lgs_twin)")
+    p.add_argument("--slopes", default="", help="LGS slopes product (cases with AO, config.slopes_spec)")
+    p.add_argument("--frames", required=True)
+    p.add_argument("--telemetry", required=True)
+    p.set_defaults(func=cmd_simulate)
+
+    p = sub.add_parser("slopes", help="measure the LGS slopes of an AO case's LGS chain")
+    p.add_argument("--spec", required=True, help="slopes spec as JSON (config.slopes_spec)")
+    p.add_argument("--screens", required=True)
+    p.add_argument("--screens-metadata", required=True)
+    p.add_argument("--calibration", default="", help="WFS calibration file (cases with wfs.calibration)")
+    p.add_argument("--out", required=True)
+    p.set_defaults(func=cmd_slopes)
+
+    p = sub.add_parser("reconstructor", help="build the tomographic reconstructors of a case")
+    p.add_argument("--spec", required=True, help="reconstructor spec as JSON")
+    p.add_argument("--out", required=True)
+    p.set_defaults(func=cmd_reconstructor)
+
+    p = sub.add_parser("commands", help="build the AO command matrix of a case")
+    p.add_argument("--spec", required=True, help="command-matrix spec as JSON")
+    p.add_argument("--out", required=True)
+    p.set_defaults(func=cmd_commands)
+
+    p = sub.add_parser("calibration", help="measure the WFS slope response of a case")
+    p.add_argument("--spec", required=True, help="calibration spec as JSON")
+    p.add_argument("--out", required=True)
+    p.set_defaults(func=cmd_calibration)
+
+    p = sub.add_parser("lucky", help="detector noise, selection, shift-and-add, scores")
+    p.add_argument("--settings", required=True, help="lucky settings as JSON")
+    p.add_argument("--frames", required=True)
+    p.add_argument("--telemetry", required=True)
+    p.add_argument("--out", required=True)
+    p.add_argument("--screens", default="", help="screens, to replay the targets the simulation did not image")
+    p.add_argument("--screens-metadata", default="")
+    p.set_defaults(func=cmd_lucky)
+
+    p = sub.add_parser("figure", help="draw one figure and write its data")
+    p.add_argument("--id", required=True)
+    given = p.add_mutually_exclusive_group(required=True)
+    given.add_argument("--settings", help="figure settings as JSON")
+    given.add_argument("--settings-file", help="figure settings as a JSON file")
+    p.add_argument("--out-prefix", required=True)
+    p.add_argument("inputs", nargs="*", help="lucky.nc files of the figure's cases, in order")
+    p.set_defaults(func=cmd_figure)
+
+    p = sub.add_parser("export", help="a case's integrated and long-exposure images as FITS")
+    p.add_argument("lucky", help="the case's lucky.nc")
+    p.add_argument("--out", required=True, help="FITS file to write")
+    p.add_argument("--detector", nargs="+", help="only these detectors (default: all)")
+    p.set_defaults(func=cmd_export)
+
+    p = sub.add_parser("table", help="a long_exposure_table figure's data as a Markdown table")
+    p.add_argument("data", help="the figure's .nc, e.g. figures/longexp.nc")
+    p.set_defaults(func=cmd_table)
+
+    p = sub.add_parser("knees", help="a registration figure's knees as a Markdown table")
+    p.add_argument("data", help="the figure's .nc, e.g. figures/registration.nc")
+    p.add_argument("--fraction", type=float, help="fraction of frames (default: the figure's first)")
+    p.add_argument("--criterion", default="lgs_rms", help="selection criterion (default lgs_rms)")
+    p.add_argument("--read-noise", type=float, default=0.1, help="read noise [e-] (default 0.1)")
+    p.set_defaults(func=cmd_knees)
+
+    p = sub.add_parser("archive", help="one tar file of a finished study, with checksums")
+    p.add_argument("--study-dir", default=".", help="the study folder Snakemake ran in (default: here)")
+    p.add_argument("--configfile", nargs="+", default=[], help="the overlays given to Snakemake's --configfile")
+    p.add_argument("--out", help="archive path (default: STUDY_DIR/archives/luckyao-<config hash>-<UTC time>.tar)")
+    p.set_defaults(func=cmd_archive)
+
+    p = sub.add_parser("verify", help="check an archive's checksums, rerun one case and compare its numbers")
+    p.add_argument("archive")
+    p.add_argument("--case", help="case to rerun (default: the one whose jobs took least time)")
+    p.add_argument("--all-cases", action="store_true", help="rerun every archived case (the whole study's time)")
+    p.add_argument("--workdir", help="folder of the rerun, kept (default: a scratch folder)")
+    p.add_argument("--rtol", type=float, default=0.0, help="relative tolerance (default 0: bit-identical)")
+    p.add_argument("--atol", type=float, default=0.0, help="absolute tolerance (default 0)")
+    p.add_argument("--cores", type=int, default=2, help="Snakemake cores of the rerun")
+    p.add_argument("--snakefile", help="workflow of the rerun (default: this checkout's)")
+    p.add_argument("--no-rerun", action="store_true", help="checksums and versions only")
+    p.set_defaults(func=cmd_verify)
+
+    p = sub.add_parser("lock", help="print (or --out) the exact versions of the runtime packages")
+    p.add_argument("--out", help="file to write, e.g. requirements.lock")
+    p.set_defaults(func=cmd_lock)
+
+    return parser
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,199 @@
+"""What each job of a study needs, from its config alone: memory and disk, before any job.
+
+Estimates (bytes) of the large arrays each step holds or writes, calibrated on the
+paper-fidelity run (README, Paper fidelity):
+
+* turbulence: the screens file, 4 bytes per sample of every layer (``.npy``,
+  float32); while made, ~12 bytes per sample of the layers in progress (the rule's
+  2 threads: the two largest) plus the interpreter and libraries (``BASE_BYTES``):
+  11.8 GB at paper fidelity;
+* reconstructor / commands: the slope covariance and its Cholesky factor
+  (2 x 8 n_slopes^2), the cross covariances and results (24 bytes per point and
+  slope; the command matrix's points a quarter of the DM pitch apart) and the file,
+  with n_slopes = 2 x beacons x the sub-apertures in the pupil's disk;
+* slopes: ``SIMULATE_BYTES`` (the sensor's screens memory-mapped) plus the slopes it
+  holds and writes, 4 bytes per slope of every WFS exposure;
+* simulate: ``SIMULATE_BYTES`` measured (the screens are memory-mapped) plus the
+  matrices and slopes it loads and a block of frames; the frame cube it writes, 4 bytes
+  per pixel of every imaged target's frames;
+* lucky: 1.5 GB and 0.21 GB of partial sums per detector for a 256-pixel camera at paper
+  fidelity (the sweep's 19 detectors, ``cog`` alone: 4.7 GB measured), the partial sums
+  scaling with the camera's pixels; a sub-pixel registration method's ~1/8 of that more.
+
+Each rule declares ``mem_mb`` from the same estimate (``mem_mb``: x ``MARGIN``, at
+least the rule's measured paper-fidelity need; lucky's estimate is its measured
+need, declared as is), and ``preflight`` refuses a study
+whose job would need more than this machine's memory, or write a file larger than
+the free disk of the study folder, naming the job and the numbers.
+"""
+
+import math
+import os
+import shutil
+from pathlib import Path
+
+from ..steps.screens import TurbulenceSpec, strip_specs
+from ..studyspec.products import (commands_key, commands_spec, reconstructor_key, reconstructor_spec, slopes_key,
+                             slopes_spec, turbulence_key, turbulence_spec)
+from ..studyspec.resolved import frame_count, imaged_targets
+from ..studyspec.lucky import lucky_settings, registrations
+
+BASE_BYTES = 0.4e9
+"""Python with numpy, scipy, numba and pyFFTW loaded."""
+SIMULATE_BYTES = 2.5e9
+"""A simulation's own memory at paper fidelity, measured (2-3 GB), screens memory-mapped."""
+MARGIN = 1.3
+"""Declared memory over the estimate."""
+TURBULENCE_THREADS = 2
+"""Layers the turbulence rule makes at once (its ``threads``)."""
+FRAME_BLOCK = 64
+"""Frames a simulation or post-processing holds at once."""
+
+
+def screens_samples(spec: dict) -> list[int]:
+    """Samples of each layer's strip of a ``studyspec.products.turbulence_spec``."""
+    return [s.n_major * s.n_minor for s in strip_specs(TurbulenceSpec.from_config(spec))]
+
+
+def screens_bytes(spec: dict) -> float:
+    """The screens file (float32 samples)."""
+    return 4.0 * sum(screens_samples(spec))
+
+
+def turbulence_memory_bytes(spec: dict) -> float:
+    """The turbulence job: 12 bytes per sample of the layers made at once (the largest)."""
+    largest = sorted(screens_samples(spec), reverse=True)[:TURBULENCE_THREADS]
+    return BASE_BYTES + 12.0 * sum(largest)
+
+
+def _slopes_and_points(spec: dict) -> tuple[float, float]:
+    """Slopes of every LGS WFS and pupil points of a reconstructor or command-matrix spec:
+    the sub-apertures and points of the pupil's disk (pi/4 of the square, obscuration
+    ignored)."""
+    n_sub = spec["wfs"]["n_subapertures"]
+    n_slopes = 2 * spec["lgs"]["n_beacons"] * math.pi / 4 * n_sub**2
+    n_points = math.pi / 4 * (n_sub * spec["tomography"]["points_per_subaperture"] + 2) ** 2
+    return n_slopes, n_points
+
+
+def reconstructor_bytes(spec: dict) -> float:
+    """The reconstructor file: one float32 matrix (points, slopes) per target."""
+    n_slopes, n_points = _slopes_and_points(spec)
+    return 4.0 * len(spec["targets_arcsec"]) * n_points * n_slopes
+
+
+def reconstructor_memory_bytes(spec: dict) -> float:
+    n_slopes, n_points = _slopes_and_points(spec)
+    return BASE_BYTES + 16.0 * n_slopes**2 + 24.0 * n_points * n_slopes + reconstructor_bytes(spec)
+
+
+def commands_bytes(spec: dict) -> float:
+    """The command-matrix file: the command matrix and the DM slopes (float64)."""
+    n_slopes, _ = _slopes_and_points(spec)
+    return 16.0 * spec["ao"]["n_actuators"] ** 2 * n_slopes
+
+
+def commands_memory_bytes(spec: dict) -> float:
+    """Its points are a quarter of the DM pitch apart (``ao.control.command_matrix``)."""
+    n_slopes, _ = _slopes_and_points(spec)
+    n_points = math.pi / 4 * (4 * (spec["ao"]["n_actuators"] - 1) + 2) ** 2
+    return BASE_BYTES + 16.0 * n_slopes**2 + 24.0 * n_points * n_slopes + commands_bytes(spec)
+
+
+def slopes_bytes(case: dict) -> float:
+    """An AO case's LGS slopes product (float32, every WFS exposure's slopes)."""
+    n_slopes, _ = _slopes_and_points(case)
+    steps_per_frame = round(case["camera"]["frame_time_s"] / case["time_step_s"])
+    return 4.0 * n_slopes * frame_count(case) * steps_per_frame / case["wfs"]["exposure_steps"]
+
+
+def slopes_memory_bytes(case: dict) -> float:
+    return SIMULATE_BYTES + slopes_bytes(case)
+
+
+def frames_bytes(case: dict) -> float:
+    """A case's frame cube (float32, its imaged targets)."""
+    return 4.0 * len(imaged_targets(case)) * frame_count(case) * case["camera"]["n_pixels"] ** 2
+
+
+def simulate_memory_bytes(case: dict) -> float:
+    """A simulation: its measured own memory, the matrices and slopes it loads, a block of frames."""
+    matrices = 0.0
+    if (spec := reconstructor_spec(case)) is not None:
+        matrices += reconstructor_bytes(spec)
+    if (spec := commands_spec(case)) is not None:
+        matrices += commands_bytes(spec) + slopes_bytes(case)
+    block = 3 * 4.0 * len(case["targets_arcsec"]) * FRAME_BLOCK * case["camera"]["n_pixels"] ** 2
+    return SIMULATE_BYTES + matrices + block
+
+
+SUBPIXEL_SUMS_FRACTION = (64**2 + 4357 + 1) / 256**2
+"""A sub-pixel method's partial sums over a whole frame's (:mod:`luckyao.lucky.cropped`: a 1.25"
+crop, the encircled energy's 4,357 radial sums and the flux per frame, for the 4.2 m camera's
+5"; at 8.2 m the radial sums are a smaller part). Written out, so that parsing the workflow loads
+no FFT code; tests/test_registration.py checks it against the layout."""
+
+
+def lucky_memory_bytes(settings: dict) -> float:
+    """A case's post-processing (``studyspec.lucky.lucky_settings``): 1.5 GB and, per detector and
+    registration method (their sums all held at once: the methods share the passes over the
+    frames), 0.21 GB of partial sums of whole frames for a 256-pixel camera (``cog``), or
+    :data:`SUBPIXEL_SUMS_FRACTION` of that for a sub-pixel method."""
+    pixels = (settings["case_config"]["camera"]["n_pixels"] / 256) ** 2
+    methods = sum(1.0 if name == "cog" else SUBPIXEL_SUMS_FRACTION for name in registrations(settings))
+    return 1.5e9 + 0.21e9 * pixels * len(settings["detectors"]) * methods
+
+
+def mem_mb(estimate_bytes: float, measured_mb: int = 0, margin: float = MARGIN) -> int:
+    """A rule's declared memory [MB]: the estimate x ``margin``, at least ``measured_mb``
+    (the rule's measured need at paper fidelity), rounded up to 100 MB."""
+    return max(measured_mb, 100 * math.ceil(margin * estimate_bytes / 1e8))
+
+
+def study_jobs(study: dict, cases: dict) -> list[tuple[str, float, str | None, float]]:
+    """(job, memory estimate, output file or None, its size) of every job of the study."""
+    jobs = {}
+    for name, case in cases.items():
+        spec = turbulence_spec(study, case)
+        key = turbulence_key(spec)
+        jobs[f"turbulence {key}"] = (turbulence_memory_bytes(spec), f"results/turbulence/{key}.npy",
+                                     screens_bytes(spec))
+        if (spec := reconstructor_spec(case)) is not None:
+            key = reconstructor_key(spec)
+            jobs[f"reconstructor {key}"] = (reconstructor_memory_bytes(spec), f"results/reconstructors/{key}.nc",
+                                            reconstructor_bytes(spec))
+        if (spec := commands_spec(case)) is not None:
+            key = commands_key(spec)
+            jobs[f"commands {key}"] = (commands_memory_bytes(spec), f"results/commands/{key}.nc",
+                                       commands_bytes(spec))
+        if (spec := slopes_spec(study, case)) is not None:
+            key = slopes_key(spec)
+            jobs[f"slopes {key}"] = (slopes_memory_bytes(case), f"results/slopes/{key}.nc", slopes_bytes(case))
+        jobs[f"simulate {name}"] = (simulate_memory_bytes(case), f"results/cases/{name}/frames.nc",
+                                    frames_bytes(case))
+        jobs[f"lucky {name}"] = (lucky_memory_bytes(lucky_settings(study, cases, name)), None, 0.0)
+    return [(job, *values) for job, values in jobs.items()]
+
+
+def machine_memory_bytes() -> float:
+    return float(os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES"))
+
+
+def preflight(study: dict, cases: dict, folder=".", memory_bytes: float | None = None) -> list[str]:
+    """One problem per job whose memory estimate exceeds ``memory_bytes`` (default: this
+    machine's) or whose output, not yet made, exceeds the free disk of ``folder``."""
+    memory_bytes = memory_bytes or machine_memory_bytes()
+    free_bytes = shutil.disk_usage(folder).free
+    problems = []
+    for job, memory, output, size in study_jobs(study, cases):
+        if memory > memory_bytes:
+            problems.append(f"job {job} needs about {_gb(memory)} of memory, more than the {_gb(memory_bytes)} "
+                            "available (this machine's memory, or --resources mem_mb=N if larger)")
+        if output is not None and size > free_bytes and not (Path(folder) / output).exists():
+            problems.append(f"job {job} writes {output} of about {_gb(size)}, more than the {_gb(free_bytes)} "
+                            "free on the study folder's disk")
+    return problems
+
+
+def _gb(n_bytes: float) -> str:
+    return f"{n_bytes / 1e9:,.1f} GB"

@@ -1,0 +1,302 @@
+"""The time loop of one case, as two chains per lucky frame:
+
+* LGS sensor -> estimator (-> correction): the frame's WFS exposures give slopes
+  (open loop: they never see the DM, so they run before the science steps they
+  correct); the estimator gives each target's ``lgs_rms``, and with AO each
+  exposure's DM command (applied with the configured delay) and the
+  pseudo-closed-loop ``lgs_residual_rms``;
+* phase source -> correction -> imager and truth: the propagator samples every
+  layer along each target's line of sight at each of the frame's 2.5 ms steps
+  (one call for all of them); the DM surface of the step is subtracted; the
+  camera image of each step's residual phase (scaled from 500 nm to the camera
+  wavelength) is added to the frame, and the tilt-removed rms of the residual
+  phases is the per-frame truth. A frame is the mean of its steps' unit-flux images.
+"""
+
+import json
+
+import numpy as np
+import xarray as xr
+
+from ..ao.apodisation import Apodiser, DelayedApodisation, SubapertureRegions
+from ..ao.correction import DelayedDm, OpenLoopCorrection
+from ..atmosphere.screens import ScreenSet
+from ..optics.imaging import Imager
+from ..optics.propagation import Propagator
+from ..optics.pupil import TiltRemover
+from ..progress import Progress
+from ..tomography.criterion import LgsRmsEstimator, lucky_frame_rms_nm
+from ..tomography.reconstructor import reconstruction_points
+from ..units import ARCSEC_RAD, REFERENCE_WAVELENGTH_M, phase_rad_to_nm
+from ..wfs.sensor import LgsSensor
+from ..studyspec.case import Case
+from ..studyspec.products import lgs_spec
+from ..io.datasets import open_dataset, require_finite
+from .lgs_slopes import lgs_sensor
+
+
+def lgs_chain(case: Case, screens: ScreenSet, reconstructors: np.ndarray,
+              seed: int, calibration=None) -> tuple[LgsSensor, LgsRmsEstimator]:
+    """The case's LGS sensor (:func:`.lgs_slopes.lgs_sensor`) and its estimator (``reconstructors``
+    (target, point, slope))."""
+    sensor = lgs_sensor(case, screens, seed, calibration)
+    return sensor, LgsRmsEstimator(reconstructors, sensor.n_slopes)
+
+
+def twin_lgs_rms_nm(path, config: dict, seed: int) -> np.ndarray:
+    """The ``lgs_rms_nm`` (target, frame) of the telemetry file ``path`` of a case's LGS twin
+    (:func:`luckyao.studyspec.products.lgs_twin`), after checking that it measured them with the
+    case's own LGS chain and seed."""
+    telemetry = open_dataset(path, "LGS twin telemetry", allow_nan={"axis_strehl", "lgs_residual_rms_nm"})
+    twin = json.loads(telemetry.attrs["config_json"])
+    if lgs_spec(twin) != lgs_spec(config) or int(telemetry.attrs["seed"]) != seed:
+        raise ValueError(f"'{path}' was not measured with this case's LGS chain and seed {seed}: "
+                         f"its lgs_rms cannot stand for this case's")
+    return telemetry["lgs_rms_nm"].values
+
+
+class SciencePath:
+    """Phase source -> correction -> imager and truth, for some of a case's targets.
+
+    ``targets``: indices into ``case.targets`` propagated (each gets its truth); ``imaged``:
+    indices into ``targets`` also imaged. :meth:`frame` computes one lucky frame.
+    """
+
+    def __init__(self, case: Case, screens: ScreenSet, targets, imaged):
+        self.case = case
+        self.imager = imager = Imager(case.telescope, case.camera)
+        self.targets, self.imaged = list(targets), list(imaged)
+        self.propagator = Propagator(list(case.layers), screens, [case.targets[t] for t in self.targets],
+                                     imager.grid, mask=imager.mask)
+        self.tilt = TiltRemover.for_mask(imager.grid, imager.mask)
+        self.to_camera = np.float32(REFERENCE_WAVELENGTH_M / case.camera.wavelength_m)
+        self._all_imaged = self.imaged == list(range(len(self.targets)))
+        self._intensity = np.empty((len(self.imaged), imager.fft_size, imager.fft_size), dtype=np.float32)
+        self._oracle, self.transmitted_flux = False, 1.0
+
+    def dm_surface(self):
+        """The DM surface function at this path's pupil samples (the case must have AO)."""
+        ao, telescope = self.case.ao, self.case.telescope
+        return ao.deformable_mirror(telescope).grid_surface(self.imager.grid, self.imager.mask)
+
+    def frame(self, frame: int, steps: np.ndarray, layer_scales: np.ndarray, dm=None,
+              truth: bool = True, apodisation: DelayedApodisation | None = None
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+        """The frame's images (imaged, n, n) float32 (the mean of its steps' images, of unit
+        flux for the full pupil), their value on the axis (imaged,) (:meth:`Imager.axis_value`)
+        and, with ``truth``, the tilt-removed rms (targets,) [rad at 500 nm] of its residual
+        phases over the whole pupil; ``dm`` (anything with ``surface_at(step)``) corrects every
+        step, ``apodisation`` (with the oracle driver fed the first target's true phases here)
+        apodises it: the transmitted flux of the frame is then :attr:`transmitted_flux`."""
+        self._intensity.fill(0.0)
+        rms2 = np.zeros(len(self.targets)) if truth else None
+        phases = self.propagator.sample_valid(steps, layer_scales)  # (k, n_targets, n_valid)
+        require_finite(phases, f"science phases of frame {frame}", "phase", ("step", "target", "sample"))
+        transmission, self.transmitted_flux = None, 0.0
+        for step, phase_500 in zip(steps, phases):
+            if apodisation is not None:
+                if self._oracle:
+                    apodisation.observe(int(step), phase_500[0])
+                transmission = apodisation.at(int(step))
+                self.transmitted_flux += float(np.mean(transmission)) / len(steps)
+            if dm is not None:
+                phase_500 = phase_500 - dm.surface_at(int(step))
+            imaged = phase_500 if self._all_imaged else phase_500[self.imaged]
+            self.imager.accumulate(imaged * self.to_camera, self._intensity,
+                                   None if transmission is None else np.broadcast_to(transmission, imaged.shape))
+            if truth:
+                rms2 += self.tilt.rms(phase_500) ** 2
+        images = self.imager.to_pixels(self._intensity / self.case.steps_per_frame)
+        return images, self.imager.axis_value(images), None if rms2 is None else np.sqrt(rms2 / self.case.steps_per_frame)
+
+    def apodisation(self, dm: DelayedDm) -> DelayedApodisation | None:
+        """The case's adaptive apodisation of this path's pupil, timed by ``dm`` (None without)."""
+        settings, case = self.case.ao.apodisation, self.case
+        if settings is None:
+            return None
+        x, y = self.imager.grid.xy_m
+        x, y = x[self.imager.mask], y[self.imager.mask]
+        regions = SubapertureRegions(case.telescope.diameter_m, case.wfs.n_subapertures)
+        apodiser = Apodiser(regions, x, y, settings.blocked_fraction)
+        self._oracle = settings.driver == "oracle"
+        if self._oracle:
+            return DelayedApodisation(apodiser, dm, self.tilt)
+        points = self.reconstruction_points()
+        return DelayedApodisation(apodiser, dm, self.tilt, regions.labels(points[:, 0], points[:, 1]),
+                                  TiltRemover(points[:, 0], points[:, 1]))
+
+    def reconstruction_points(self) -> np.ndarray:
+        """The LGS reconstructors' pupil points (n_points, 2) [m] (``study.reconstructor``)."""
+        case = self.case
+        return reconstruction_points(case.telescope, case.shack_hartmann().subaperture_m,
+                                     case.tomography.points_per_subaperture)
+
+
+def simulate(case: Case, screens: ScreenSet, write_frames, sensor: LgsSensor | None = None,
+             estimator: LgsRmsEstimator | None = None, commands: tuple[np.ndarray, np.ndarray] | None = None,
+             imaged_targets=None, block_frames: int = 32, lgs_rms_nm: np.ndarray | None = None) -> xr.Dataset:
+    """Run the case; ``write_frames(start, frames (imaged target, k, n, n))`` receives the
+    noiseless unit-flux frames of ``imaged_targets`` (indices into ``case.targets``,
+    default all; every target gets its truth). Returns the telemetry dataset. With an LGS
+    ``sensor`` (or its recorded slopes, :class:`.lgs_slopes.RecordedSlopes`) and its ``estimator``, each frame also gets its ``lgs_rms_nm``; a case
+    without AO may instead be given them (target, frame), as measured by a case with the
+    same LGS chain (:func:`luckyao.studyspec.products.lgs_twin`);
+    with ``commands`` (the command matrix and the DM slopes of the case's
+    ``ao`` settings, :func:`luckyao.steps.reconstructor.build_commands`) the DM
+    corrects every step, each frame gets its ``lgs_residual_rms_nm`` and every
+    exposure's DM commands are recorded (``dm_commands_m``), so that the science path
+    of the targets not imaged can be replayed (:class:`Replay`).
+
+    Per frame it records the truth (tilt-removed rms) and the imaged targets' frame
+    value on the optical axis over the diffraction-limited peak, whose mean over frames
+    is the long-exposure Strehl (no recentring): a plain mean, so its
+    Monte-Carlo error follows from batch means.
+    """
+    n_targets, n_frames, spf = len(case.targets), case.n_frames, case.steps_per_frame
+    imaged = list(range(n_targets)) if imaged_targets is None else sorted(imaged_targets)
+    science = SciencePath(case, screens, range(n_targets), imaged)
+    imager = science.imager
+    correction = apodisation = None
+    if commands is not None:
+        correction = OpenLoopCorrection(*commands, science.dm_surface(), sensor.exposure_steps,
+                                        case.ao.delay_steps, spf)
+        dm_commands = np.empty((n_frames * spf // sensor.exposure_steps, correction.dm.n_actuators), np.float32)
+        apodisation = science.apodisation(correction.dm)
+        if apodisation is not None and apodisation.point_labels is not None:  # LGS driver
+            points = science.reconstruction_points()
+            dm_at_points = case.ao.deformable_mirror(case.telescope).influence_matrix(
+                points[:, 0], points[:, 1]).astype(np.float32)  # (n_points, n_act) [m / m]
+    steps_max = science.propagator.n_steps_max
+    if sensor is not None:
+        steps_max = min(steps_max, sensor.n_steps_max)
+    if n_frames * spf > steps_max:
+        raise ValueError(f"the screens hold {steps_max} steps, the case needs {n_frames * spf}")
+    n_pix = case.camera.n_pixels
+
+    true_rms_nm = np.empty((n_targets, n_frames), dtype=np.float32)
+    r0_frame = np.empty(n_frames)
+    axis_strehl = np.full((n_targets, n_frames), np.nan, dtype=np.float32)
+    if lgs_rms_nm is not None:
+        if sensor is not None or commands is not None or np.shape(lgs_rms_nm) != (n_targets, n_frames):
+            raise ValueError(f"given LGS telemetry needs a case without AO or sensor and shape "
+                             f"{(n_targets, n_frames)}, got {np.shape(lgs_rms_nm)}")
+        lgs_rms = np.asarray(lgs_rms_nm, dtype=np.float32)
+    else:
+        lgs_rms = np.full((n_targets, n_frames), np.nan, dtype=np.float32)
+    lgs_residual_rms = np.full((n_targets, n_frames), np.nan, dtype=np.float32)
+    transmitted = np.empty(n_frames, dtype=np.float32)
+    progress = Progress("frames", n_frames)
+    buffer = np.empty((len(imaged), block_frames, n_pix, n_pix), dtype=np.float32)
+    for start in range(0, n_frames, block_frames):
+        count = min(block_frames, n_frames - start)
+        for j in range(count):
+            frame = start + j
+            steps = frame * spf + np.arange(spf)
+            layer_scales = case.layer_scales(steps)
+            if sensor is not None:  # LGS sensor -> estimator (-> correction); spf is a multiple of exposure_steps
+                e = sensor.exposure_steps
+                starts = steps[::e]
+                slopes = np.stack([sensor.exposure_slopes(steps[i:i + e], layer_scales[i:i + e])
+                                   for i in range(0, spf, e)])
+                require_finite(slopes, f"LGS slopes of frame {frame}", "slopes",
+                               ("exposure", "beacon", "axis", "subaperture"))
+                lgs_rms[:, frame] = lucky_frame_rms_nm(estimator.rms_nm(slopes))
+                if correction is not None:
+                    for start_step, exposure in zip(starts, slopes):
+                        dm_commands[start_step // e] = correction.measure(int(start_step), exposure)
+                        if apodisation is not None and apodisation.point_labels is not None:
+                            apodisation.from_estimate(int(start_step), estimator.reconstructors[0] @ exposure.ravel(),
+                                                      dm_at_points @ dm_commands[start_step // e])
+                    residual = np.stack([correction.residual_slopes(int(s), exposure)
+                                         for s, exposure in zip(starts, slopes)])
+                    lgs_residual_rms[:, frame] = lucky_frame_rms_nm(estimator.rms_nm(residual))
+            buffer[:, j], axis_strehl[imaged, frame], rms = science.frame(frame, steps, layer_scales, correction,
+                                                                          apodisation=apodisation)
+            if apodisation is not None:
+                transmitted[frame] = science.transmitted_flux
+            true_rms_nm[:, frame] = phase_rad_to_nm(rms, REFERENCE_WAVELENGTH_M)
+            r0_frame[frame] = np.mean(case.r0.r0_m(steps * case.time_step_s))
+        write_frames(start, buffer[:, :count])
+        progress.update(start + count)
+
+    frame_time = spf * case.time_step_s
+    extra = {}
+    if sensor is not None or lgs_rms_nm is not None:
+        extra["lgs_rms_nm"] = (("target", "frame"), lgs_rms, {
+            "units": "nm", "long_name": "tilt-removed rms of the LGS tomographic reconstruction along the "
+            "target, over the frame's WFS exposures"})
+    if correction is not None:
+        extra["lgs_residual_rms_nm"] = (("target", "frame"), lgs_residual_rms, {
+            "units": "nm", "long_name": "tilt-removed rms of the LGS pseudo-closed-loop reconstruction (open-loop "
+            "slopes less the DM's) along the target, over the frame's WFS exposures"})
+        if apodisation is not None:
+            extra["transmitted_flux"] = (("frame",), transmitted, {
+                "units": "1", "long_name": "flux through the adaptively apodised pupil over the full pupil's, "
+                f"mean over the frame's steps (blocked fraction of the pupil area: 1 minus it); driver "
+                f"{case.ao.apodisation.driver}"})
+        extra["dm_commands_m"] = (("exposure", "actuator"), dm_commands, {
+            "units": "m", "long_name": "DM commands of each WFS exposure (applied from delay_steps after its "
+            "start), valid actuators"})
+    return xr.Dataset(
+        {
+            **extra,
+            "true_rms_nm": (("target", "frame"), true_rms_nm,
+                            {"units": "nm", "long_name": "tilt-removed rms of the residual (corrected) "
+                             "wavefront over the pupil and the frame's exposure"}),
+            "r0_500nm_m": (("frame",), r0_frame, {"units": "m", "long_name": "Fried parameter at 500 nm"}),
+            "axis_strehl": (("target", "frame"), axis_strehl,
+                            {"units": "1", "long_name": "frame value on the optical axis over the "
+                             "diffraction-limited peak (NaN: target not imaged by the simulation)"}),
+        },
+        coords={
+            "time_s": (("frame",), np.arange(n_frames) * frame_time,
+                       {"units": "s", "long_name": "start time of the frame"}),
+            "target_x_arcsec": (("target",), [t.theta_x_rad / ARCSEC_RAD for t in case.targets],
+                                {"units": "arcsec", "long_name": "target x direction"}),
+            "target_y_arcsec": (("target",), [t.theta_y_rad / ARCSEC_RAD for t in case.targets],
+                                {"units": "arcsec", "long_name": "target y direction"}),
+            "imaged": (("target",), np.isin(np.arange(n_targets), imaged).astype(np.int8),
+                       {"units": "1", "long_name": "target imaged (frames written) by the simulation"}),
+        },
+        attrs={"diffraction_limited_peak": imager.diffraction_limited_peak,
+               "pupil_samples": imager.grid.n_pix, "pupil_sample_m": imager.grid.dx_m},
+    )
+
+
+class Replay:
+    """The science path of some of a case's targets replayed frame by frame, corrected by the
+    recorded DM commands: called, an iterator of ``(start, frames (target, k, n, n))``, and the
+    frames' value on the axis (:meth:`Imager.axis_value`) in :attr:`axis_strehl` (target,
+    frame) once they have been made. Recomputing these frames is as fast as simulating them
+    and stores nothing: the frames of a field case's off-axis targets are made where they are
+    used (post-processing), not kept on disk."""
+
+    def __init__(self, case: Case, screens: ScreenSet, targets, dm_commands_m: np.ndarray | None,
+                 block_frames: int = 64):
+        """``targets``: indices into ``case.targets``; ``dm_commands_m`` (exposure, actuator) of
+        :func:`simulate`, None without AO."""
+        self.case, self.screens, self.targets = case, screens, list(targets)
+        self.dm_commands_m, self.block_frames = dm_commands_m, block_frames
+        self.axis_strehl = np.full((len(self.targets), case.n_frames), np.nan, dtype=np.float32)
+
+    def __call__(self):
+        case = self.case
+        if case.ao.apodisation is not None:
+            raise ValueError("replaying an adaptively apodised case (ao.apodisation) is not supported: image all "
+                             "its targets in the simulation")
+        spf, exposure_steps = case.steps_per_frame, case.wfs.exposure_steps
+        science = SciencePath(case, self.screens, self.targets, range(len(self.targets)))
+        dm = None
+        if self.dm_commands_m is not None:
+            dm = DelayedDm(science.dm_surface(), exposure_steps, case.ao.delay_steps, spf)
+        block = np.empty((len(self.targets), self.block_frames) + (case.camera.n_pixels,) * 2, dtype=np.float32)
+        for start in range(0, case.n_frames, self.block_frames):
+            count = min(self.block_frames, case.n_frames - start)
+            for j in range(count):
+                steps = (start + j) * spf + np.arange(spf)
+                if dm is not None:
+                    for step in steps[::exposure_steps]:
+                        dm.apply(int(step), self.dm_commands_m[step // exposure_steps])
+                block[:, j], self.axis_strehl[:, start + j], _ = science.frame(
+                    start + j, steps, case.layer_scales(steps), dm, truth=False)
+            yield start, block[:, :count].copy()

@@ -1,0 +1,65 @@
+"""The lucky post-processing keys of a study (``lucky``): their defaults from the schema, the
+detector sweep's named detectors, and the settings one case's lucky job uses."""
+
+import numpy as np
+
+from .schema import load_schema
+
+SIGNAL_KINDS = ("quality_vs_signal", "registration")
+"""The figure kinds drawn against the detector sweep: their cases get it and every registration method."""
+
+
+def _lucky_value(lucky: dict, key: str):
+    """``lucky[key]``, by default the schema's default of that key."""
+    return lucky.get(key, load_schema()["properties"]["lucky"]["properties"][key]["default"])
+
+
+def image_crop_px(lucky: dict) -> int | None:
+    """Pixels across the images ``lucky.nc`` keeps: ``lucky.image_crop_px``, by default the
+    schema's (64); None: the whole frame."""
+    return _lucky_value(lucky, "image_crop_px")
+
+
+def error_blocks(lucky: dict) -> int:
+    """Time blocks for the Monte-Carlo errors: ``lucky.error_blocks``, by default the schema's."""
+    return _lucky_value(lucky, "error_blocks")
+
+
+def frame_strehl(lucky: dict) -> str:
+    """How a frame's Strehl is measured: ``lucky.frame_strehl``, by default the schema's (``peak_pixel``)."""
+    return _lucky_value(lucky, "frame_strehl")
+
+
+def registrations(lucky: dict) -> list[str]:
+    """The registration methods: ``lucky.registration``, by default the schema's (``cog`` only)."""
+    return list(_lucky_value(lucky, "registration"))
+
+
+def sweep_detectors(lucky: dict) -> dict:
+    """The named detectors of ``lucky.detector_sweep`` (none without it): every read noise
+    x ``levels`` photon counts per frame, log-spaced from ``min`` to ``max``."""
+    sweep = lucky.get("detector_sweep")
+    if sweep is None:
+        return {}
+    grid = sweep["photons_per_frame"]
+    photons = np.geomspace(grid["min"], grid["max"], grid["levels"])
+    return {sweep_name(read_noise, n): {"photons_per_frame": float(n), "read_noise_e": float(read_noise)}
+            for read_noise in sweep["read_noise_e"] for n in photons}
+
+
+def sweep_name(read_noise_e: float, photons_per_frame: float) -> str:
+    return f"rn{read_noise_e:g}_{photons_per_frame:.3g}ph"
+
+
+def lucky_settings(study: dict, cases: dict, case_name: str) -> dict:
+    """The post-processing settings one case's lucky job uses, with its resolved config:
+    every listed detector, and the detector sweep and every registration method when a
+    ``quality_vs_signal`` or ``registration`` figure shows the case (their cost goes only where
+    they are drawn; elsewhere ``cog`` alone)."""
+    lucky = {key: value for key, value in study["lucky"].items() if key not in ("detector_sweep", "registration")}
+    lucky["error_blocks"] = error_blocks(study["lucky"])
+    lucky["registration"] = ["cog"]
+    if any(f["kind"] in SIGNAL_KINDS and case_name in f["cases"] for f in study["figures"].values()):
+        lucky["detectors"] = {**lucky["detectors"], **sweep_detectors(study["lucky"])}
+        lucky["registration"] = registrations(study["lucky"])
+    return {"seed": study["seed"], "case": case_name, "case_config": cases[case_name], **lucky}

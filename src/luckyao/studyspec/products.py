@@ -1,0 +1,112 @@
+"""The cached products' specs: everything each product (screens, reconstructor, AO
+command matrix, WFS calibration, LGS slopes) depends on, and its key (a hash of the spec),
+so cases that share a product share its file."""
+
+from ..io.hashing import sha256
+from .scaling import screen_min_across_m
+from .schema import case_defaults
+
+def turbulence_spec(study: dict, case: dict) -> dict:
+    """Everything the shared screens depend on (not r0 or Cn2: those only scale them); the
+    strips' width across the wind for this case's telescope (``scaling.screen_min_across_m``)."""
+    atm = case["atmosphere"]
+    turbulence = {key: value for key, value in study["turbulence"].items() if key != "min_across_diameters"}
+    return {
+        "seed": study["seed"],
+        **turbulence,
+        "min_across_m": screen_min_across_m(study["turbulence"], case["telescope"]["diameter_m"]),
+        "time_step_s": case["time_step_s"],
+        "diameter_m": case["telescope"]["diameter_m"],
+        "outer_scale_m": atm["outer_scale_m"],
+        "height_m": atm["height_m"],
+        "wind_speed_m_s": atm["wind_speed_m_s"],
+        "wind_direction_deg": atm["wind_direction_deg"],
+    }
+
+
+def turbulence_key(spec: dict) -> str:
+    return "screens_" + sha256(spec)[:12]
+
+
+def reconstructor_spec(case: dict) -> dict | None:
+    """Everything a case's tomographic reconstructor depends on (None without LGS)."""
+    if not case["lgs"]["enabled"]:
+        return None
+    return {key: case[key] for key in ("telescope", "lgs", "wfs", "tomography", "targets_arcsec")}
+
+
+def reconstructor_key(spec: dict) -> str:
+    return "reconstructor_" + sha256(spec)[:12]
+
+
+def commands_spec(case: dict) -> dict | None:
+    """Everything a case's AO command matrix depends on (None without AO): not the
+    targets or the atmosphere, so cases that differ only there share it."""
+    if case["ao"]["mode"] == "none":
+        return None
+    ao = {key: value for key, value in case["ao"].items() if key != "apodisation"}  # not in the commands
+    return {**{key: case[key] for key in ("telescope", "lgs", "wfs", "tomography")}, "ao": ao}
+
+
+def commands_key(spec: dict) -> str:
+    return "commands_" + sha256(spec)[:12]
+
+
+def calibration_spec(study: dict, case: dict) -> dict | None:
+    """Everything a case's WFS calibration depends on (None without LGS or calibration):
+    the sensor, its estimator and the seeing (the mean r0; not the winds, the noise or
+    the exposure time, so cases that differ only there share it)."""
+    wfs = case["wfs"]
+    if not case["lgs"]["enabled"] or {**case_defaults("wfs"), **wfs}["calibration"] == "none":
+        return None
+    atm = case["atmosphere"]
+    return {"seed": study["seed"], "telescope": case["telescope"], "lgs": case["lgs"],
+            "wfs": {k: v for k, v in wfs.items() if k not in ("photons_per_subaperture", "read_noise_e", "exposure_steps")},
+            "atmosphere": {k: atm[k] for k in ("r0_500nm_m", "outer_scale_m", "height_m", "cn2_fraction")}}
+
+
+def calibration_key(spec: dict) -> str:
+    return "calibration_" + sha256(spec)[:12]
+
+
+def lgs_spec(case: dict) -> dict | None:
+    """Everything of a resolved case that its LGS telemetry (each frame's ``lgs_rms``)
+    depends on besides its screens and seed (None without LGS): the case less its AO (the
+    sensor is open loop: it never sees the DM), its camera but the frame time, and its
+    reference target."""
+    if not case["lgs"]["enabled"]:
+        return None
+    spec = {key: value for key, value in case.items() if key not in ("ao", "camera", "reference_target")}
+    return {**spec, "frame_time_s": case["camera"]["frame_time_s"]}
+
+
+def lgs_chain_config(case: dict) -> dict:
+    """A resolved case less its AO (the LGS sensor is open loop: it never sees the DM) and its
+    targets, which its LGS slopes do not depend on; the rest makes a :class:`.case.Case`."""
+    return {key: value for key, value in case.items() if key not in ("ao", "targets_arcsec", "reference_target")}
+
+
+def slopes_spec(study: dict, case: dict) -> dict | None:
+    """Everything an AO case's LGS slopes depend on (None without AO): its LGS chain, the
+    seed and the screens; cases that differ only in their AO or targets share them."""
+    if case["ao"]["mode"] == "none":
+        return None
+    return {"seed": study["seed"], "screens": turbulence_key(turbulence_spec(study, case)),
+            "case": lgs_chain_config(case)}
+
+
+def slopes_key(spec: dict) -> str:
+    return "slopes_" + sha256(spec)[:12]
+
+
+def lgs_twin(study: dict, cases: dict, name: str) -> str | None:
+    """The case whose simulation measures a no-AO case's LGS telemetry, so that its own
+    simulation images the science targets only: the first AO case (by name) with the same
+    :func:`lgs_spec` and screens, whose simulation measures exactly the same slopes; None
+    for a case with AO, without LGS, or with no such case."""
+    case = cases[name]
+    if case["ao"]["mode"] != "none" or (spec := lgs_spec(case)) is None:
+        return None
+    screens = turbulence_spec(study, case)
+    return next((other for other in sorted(cases) if cases[other]["ao"]["mode"] != "none"
+                 and lgs_spec(cases[other]) == spec and turbulence_spec(study, cases[other]) == screens), None)

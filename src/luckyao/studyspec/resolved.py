@@ -1,0 +1,28 @@
+"""Questions asked of a resolved case config: its frames, the targets its simulation
+images, the selection criteria it can give."""
+
+import numpy as np
+
+def frame_count(case: dict) -> int:
+    """Whole lucky frames in a resolved case's duration."""
+    return int(np.floor(case["duration_s"] / case["camera"]["frame_time_s"] + 1e-9))
+
+
+def imaged_targets(case: dict) -> list[int]:
+    """Indices of the targets a resolved case's simulation images and stores: every target,
+    or with a ``reference_target`` and several targets only that one (the star); the
+    others are replayed where they are post-processed, so a field's frames never all
+    sit on disk."""
+    reference, n_targets = case.get("reference_target"), len(case["targets_arcsec"])
+    return list(range(n_targets)) if reference is None or n_targets == 1 else [reference]
+
+
+def criteria_of(case: dict) -> set[str]:
+    """Selection criteria a resolved case gives: image criteria always, ``lgs_rms`` with
+    LGS, ``lgs_residual_rms`` and the oracle ``true_rms`` with AO."""
+    criteria = {"strehl", "d50"}
+    if case["lgs"]["enabled"]:
+        criteria.add("lgs_rms")
+    if case["ao"]["mode"] != "none":
+        criteria |= {"lgs_residual_rms", "true_rms"}
+    return criteria

@@ -1,0 +1,217 @@
+"""A study config: read (YAML files merged in order), validated and resolved into cases.
+
+A study config has a ``base`` system and named ``cases`` that override it. Everything is
+checked against the schema (``schema.yaml``) and a few cross-key rules before any job runs;
+the first problem of each case and figure is reported as a ``ConfigError`` naming the key.
+"""
+
+import yaml
+
+from .lucky import SIGNAL_KINDS, error_blocks
+from .resolved import criteria_of, frame_count
+from .scaling import derive_size_defaults
+from .schema import ConfigError, check_finite, deep_merge, load_schema, validate_keys
+from .sweeps import expand_sweeps
+
+def _check_case(name: str, case: dict, turbulence: dict) -> None:
+    where = f"cases.{name}"
+    atm = case["atmosphere"]
+    n = len(atm["height_m"])
+    for key in ("cn2_fraction", "wind_speed_m_s", "wind_direction_deg"):
+        if len(atm[key]) != n:
+            raise ConfigError(f"config key '{where}.atmosphere.{key}': has {len(atm[key])} values, "
+                              f"height_m has {n}")
+    if abs(sum(atm["cn2_fraction"]) - 1) > 1e-3:
+        raise ConfigError(f"config key '{where}.atmosphere.cn2_fraction': sums to "
+                          f"{sum(atm['cn2_fraction']):.4f}, must sum to 1")
+    if atm["r0_amplitude_m"] >= atm["r0_500nm_m"]:
+        raise ConfigError(f"config key '{where}.atmosphere.r0_amplitude_m': must be below r0_500nm_m")
+    steps = case["camera"]["frame_time_s"] / case["time_step_s"]
+    if abs(steps - round(steps)) > 1e-6 or round(steps) < 1:
+        raise ConfigError(f"config key '{where}.camera.frame_time_s': must be a whole number of time_step_s")
+    if case["duration_s"] < case["camera"]["frame_time_s"]:
+        raise ConfigError(f"config key '{where}.duration_s': shorter than one camera frame")
+    if case["duration_s"] > turbulence["duration_s"] + 1e-9:
+        raise ConfigError(f"config key '{where}.duration_s': {case['duration_s']} s exceeds "
+                          f"turbulence.duration_s = {turbulence['duration_s']} s")
+    tomo = case["tomography"]
+    if len(tomo["layer_cn2_fraction"]) != len(tomo["layer_heights_m"]):
+        raise ConfigError(f"config key '{where}.tomography.layer_cn2_fraction': has "
+                          f"{len(tomo['layer_cn2_fraction'])} values, layer_heights_m has {len(tomo['layer_heights_m'])}")
+    if case["lgs"]["enabled"] and steps % case["wfs"]["exposure_steps"]:
+        raise ConfigError(f"config key '{where}.wfs.exposure_steps': must divide the {round(steps)} steps "
+                          "of a camera frame")
+    if case["ao"]["mode"] != "none":
+        if not case["lgs"]["enabled"]:
+            raise ConfigError(f"config key '{where}.ao.mode': {case['ao']['mode']} needs lgs.enabled: true")
+        if case["ao"]["delay_steps"] < case["wfs"]["exposure_steps"]:
+            raise ConfigError(f"config key '{where}.ao.delay_steps': a command cannot be applied before its "
+                              f"exposure ends (at least wfs.exposure_steps = {case['wfs']['exposure_steps']})")
+    if "apodisation" in case["ao"] and case["ao"]["mode"] == "none":
+        raise ConfigError(f"config key '{where}.ao.apodisation': needs ao.mode ltao or glao (it is applied with "
+                          "each exposure's DM command)")
+    if case["telescope"]["obscuration_m"] >= case["telescope"]["diameter_m"]:
+        raise ConfigError(f"config key '{where}.telescope.obscuration_m': must be below diameter_m")
+    reference = case.get("reference_target")
+    if reference is not None and reference >= len(case["targets_arcsec"]):
+        raise ConfigError(f"config key '{where}.reference_target': {reference} is not the index of one of the "
+                          f"{len(case['targets_arcsec'])} targets_arcsec")
+    radius = turbulence["field_radius_arcsec"]
+    for x, y in case["targets_arcsec"]:
+        if (x * x + y * y) ** 0.5 > radius:
+            raise ConfigError(f"config key '{where}.targets_arcsec': target ({x}, {y}) lies beyond "
+                              f"turbulence.field_radius_arcsec = {radius}")
+
+
+def validate_study(config: dict, schema: dict | None = None) -> dict:
+    """Check a study config; returns ``{case name: resolved case config}``.
+
+    Raises ``ConfigError`` with one line per problem, each naming its key: every
+    schema violation of the study, then the first problem of each case and of each
+    figure.
+    """
+    schema = schema or load_schema()
+    check_finite(config, "")
+    config = expand_sweeps(config)
+    validate_keys(config, schema, "")
+    case_schema = dict(schema["definitions"]["case"], definitions=schema["definitions"])
+    cases, problems = {}, []
+    for name, override in config["cases"].items():
+        resolved = deep_merge(config["base"], override)
+        try:
+            validate_keys(resolved, case_schema, f"cases.{name}")
+            resolved = derive_size_defaults(resolved, f"cases.{name}")
+            _check_case(name, resolved, config["turbulence"])
+            n_frames = frame_count(resolved)
+            blocks = error_blocks(config["lucky"])
+            if n_frames < 2 * blocks:
+                raise ConfigError(f"config key 'lucky.error_blocks': {blocks} blocks need at least {2 * blocks} "
+                                  f"frames, case '{name}' has {n_frames}")
+        except ConfigError as err:
+            problems.append(str(err))
+            continue
+        cases[name] = resolved
+    for fig_id, figure in config["figures"].items():
+        try:
+            _check_figure(fig_id, figure, cases, config)
+        except ConfigError as err:
+            problems.append(str(err))
+    if problems:
+        raise ConfigError("\n".join(problems))
+    return cases
+
+
+def _check_figure(fig_id: str, figure: dict, cases: dict, config: dict) -> None:
+    for case in figure["cases"]:
+        if case not in config["cases"]:
+            raise ConfigError(f"config key 'figures.{fig_id}.cases': unknown case '{case}'")
+    needs = {"quality_vs_fraction": ("criteria",), "quality_vs_distance": ("criteria", "fractions"),
+             "quality_vs_parameter": ("sweep", "criteria", "fractions"), "psf_gallery": ("criteria", "fractions"),
+             "quality_vs_diameter": ("criteria", "fractions")}
+    for key in needs.get(figure["kind"], ()):
+        if key not in figure:
+            raise ConfigError(f"config key 'figures.{fig_id}.{key}': required for {figure['kind']}")
+    if "parameter" in figure and figure["parameter"] not in config["sweeps"][figure["sweep"]]["parameters"]:
+        raise ConfigError(f"config key 'figures.{fig_id}.parameter': '{figure['parameter']}' is not a parameter "
+                          f"of sweep '{figure['sweep']}'")
+    if figure["kind"] == "comparisons":
+        if "pairs" not in figure:
+            raise ConfigError(f"config key 'figures.{fig_id}.pairs': required for comparisons")
+        for i, pair in enumerate(figure["pairs"]):
+            for side in ("a", "b"):
+                case, criterion = pair[side]["case"], pair[side]["criterion"]
+                if case not in figure["cases"]:
+                    raise ConfigError(f"config key 'figures.{fig_id}.pairs[{i}].{side}.case': '{case}' is not "
+                                      f"in the figure's cases")
+                if case in cases and criterion not in criteria_of(cases[case]):
+                    raise ConfigError(f"config key 'figures.{fig_id}.pairs[{i}].{side}.criterion': case '{case}' "
+                                      f"cannot give {criterion}")
+    if figure["kind"] == "quality_vs_distance":
+        for case in figure["cases"]:
+            if case in cases and len(cases[case]["targets_arcsec"]) < 2:
+                raise ConfigError(f"config key 'figures.{fig_id}.cases': case '{case}' has one target; "
+                                  "quality_vs_distance needs a field of targets")
+    for case in figure["cases"]:
+        if case not in cases:  # invalid itself: reported with the cases
+            continue
+        produced = criteria_of(cases[case])
+        needed = set(figure.get("criteria", []))
+        needed |= {"lgs_rms"} if figure["kind"] == "rms_truth" else set()
+        needed |= {"lgs_residual_rms"} if figure["kind"] == "residuals" else set()
+        if needed - produced:
+            raise ConfigError(f"config key 'figures.{fig_id}.cases': case '{case}' cannot give "
+                              f"{', '.join(sorted(needed - produced))} (needs "
+                              f"{'LGS' if 'lgs_rms' in needed - produced else 'AO'})")
+    detector = figure.get("detector")
+    if detector is not None and detector not in config["lucky"]["detectors"]:
+        raise ConfigError(f"config key 'figures.{fig_id}.detector': unknown detector '{detector}'")
+    if figure["kind"] in SIGNAL_KINDS:
+        kind = figure["kind"]
+        sweep = config["lucky"].get("detector_sweep")
+        if sweep is None:
+            raise ConfigError(f"config key 'figures.{fig_id}.kind': {kind} needs lucky.detector_sweep")
+        for key in ("criteria", "fractions", "read_noise_e") + (("metric",) if kind == "quality_vs_signal" else ()):
+            if key not in figure:
+                raise ConfigError(f"config key 'figures.{fig_id}.{key}': required for {kind}")
+        missing = set(figure["read_noise_e"]) - set(sweep["read_noise_e"])
+        if missing:
+            raise ConfigError(f"config key 'figures.{fig_id}.read_noise_e': {sorted(missing)} not in "
+                              "lucky.detector_sweep.read_noise_e")
+    missing = set(figure.get("fractions", [])) - set(config["lucky"]["fractions"])
+    if missing:
+        raise ConfigError(f"config key 'figures.{fig_id}.fractions': {sorted(missing)} not in lucky.fractions")
+
+
+PLAUSIBLE_RANGES = (
+    ("atmosphere.r0_500nm_m", 0.02, 2.0, "m", "a Fried parameter at 500 nm (10 cm is 0.10)"),
+    ("atmosphere.outer_scale_m", 1.0, 1000.0, "m", "an outer scale"),
+    ("camera.wavelength_m", 3e-7, 3e-6, "m", "a science wavelength (0.3-3 um)"),
+    ("lgs.wavelength_m", 3e-7, 3e-6, "m", "a laser wavelength (0.3-3 um)"),
+    ("lgs.height_m", 5e3, 200e3, "m", "a beacon height"),
+    ("telescope.diameter_m", 0.1, 100.0, "m", "a telescope diameter"),
+    ("duration_s", 0.0, 3600.0, "s", "telescope time per case"),
+    ("camera.frame_time_s", 1e-4, 1.0, "s", "a lucky frame's exposure"),
+)
+"""(key path of a case, lowest and highest plausible value, unit, what it is): values
+outside are allowed but warned about (a unit slip, e.g. r0 in cm written as metres)."""
+
+
+def plausibility_warnings(cases: dict) -> list[str]:
+    """One line per value of a resolved case outside :data:`PLAUSIBLE_RANGES` or a wind
+    speed above 100 m/s, naming the key; the config stays valid."""
+    lines = []
+    for name, case in cases.items():
+        for path, low, high, unit, what in PLAUSIBLE_RANGES:
+            value = case
+            for part in path.split("."):
+                value = value[part]
+            if not low <= value <= high:
+                lines.append(f"config key 'cases.{name}.{path}': {value:g} {unit} is outside {low:g}-{high:g} "
+                             f"{unit}, implausible for {what}; is the unit right?")
+        fastest = max(case["atmosphere"]["wind_speed_m_s"])
+        if fastest > 100:
+            lines.append(f"config key 'cases.{name}.atmosphere.wind_speed_m_s': {fastest:g} m/s is above 100 m/s")
+    return lines
+
+
+def unused_cases(config: dict) -> list[str]:
+    """Cases that no figure lists (``all`` does not run them; ``all_cases`` does)."""
+    shown = {case for figure in config["figures"].values() for case in figure["cases"]}
+    return [name for name in config["cases"] if name not in shown]
+
+
+def load_study(*paths) -> tuple[dict, dict]:
+    """Read study YAML files, each deep-merged over the one before (as Snakemake's
+    ``configfile:`` and ``--configfile`` do), and validate the result; returns
+    (config as written, resolved cases: the sweeps' among them)."""
+    config = {}
+    for path in paths:
+        try:
+            with open(path) as f:
+                layer = yaml.safe_load(f) or {}
+        except FileNotFoundError as err:
+            raise ConfigError(f"config file '{path}' not found") from err
+        except yaml.YAMLError as err:
+            raise ConfigError(f"config file '{path}' is not valid YAML: {err}") from err
+        config = deep_merge(config, layer)
+    return config, validate_study(config)

@@ -1,0 +1,138 @@
+"""Sweeps: a grid of config values expanded into named cases.
+
+A study's ``sweeps`` block names grids over key paths of a case::
+
+    sweeps:
+      r0:
+        overrides: {wfs: {n_subapertures: 8}}         # shared by every point (optional)
+        parameters:
+          atmosphere.r0_500nm_m: [0.10, 0.135, 0.20]
+          ao.mode: [ltao, none]
+
+Every combination of the values (the product, in the order written) is a case, an
+override of ``base`` like any other, named by its values:
+``r0_r0_500nm_m-0.1_mode-ltao`` (``<sweep>_<key>-<value>_...``, the key's last part,
+or its whole path when two parameters share a last part). A point whose resolved
+config equals a case of ``cases`` is that case (it is not simulated twice). Adding
+values adds cases and leaves the others' names and configs as they were, so only the
+new ones run. A figure with ``sweep: r0`` draws every point of the grid.
+"""
+
+import copy
+import itertools
+import re
+from dataclasses import dataclass
+
+from .schema import ConfigError, deep_merge
+
+CASE_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.+-]*$")
+"""A case name that is safe as a file name and in a shell word (no ``..``)."""
+
+
+@dataclass(frozen=True)
+class SweepPoint:
+    """One grid point of a sweep: its case name and ``{key path: value}``."""
+
+    case: str
+    values: dict
+
+
+def _value_text(value) -> str:
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, (int, float)):
+        return f"{value:g}"
+    return str(value)
+
+
+def _labels(paths: list[str]) -> dict[str, str]:
+    """Each key path's label in case names: its last part, or the path when ambiguous."""
+    last = [p.rsplit(".", 1)[-1] for p in paths]
+    return {p: (leaf if last.count(leaf) == 1 else p) for p, leaf in zip(paths, last)}
+
+
+def _nested(path: str, value) -> dict:
+    """``a.b.c`` and ``v`` as ``{a: {b: {c: v}}}``."""
+    out = value
+    for part in reversed(path.split(".")):
+        out = {part: out}
+    return out
+
+
+def _check_path(base: dict, path: str, where: str) -> None:
+    from .scaling import DERIVED_KEYS  # keys a case may leave to the diameter, and their parameters
+
+    if path in DERIVED_KEYS or path in DERIVED_KEYS.values():
+        return
+    node = base
+    for part in path.split("."):
+        if not isinstance(node, dict) or part not in node:
+            raise ConfigError(f"config key '{where}': '{path}' is not a key of base (or of the sweep's overrides)")
+        node = node[part]
+    if isinstance(node, dict):
+        raise ConfigError(f"config key '{where}': '{path}' is a block of base, not a value")
+
+
+def sweep_points(config: dict, sweep: str) -> list[SweepPoint]:
+    """The grid points of ``config['sweeps'][sweep]``, each with its case name (an
+    existing case of ``cases`` when its resolved config is the same)."""
+    spec = config["sweeps"][sweep]
+    parameters = spec["parameters"]
+    paths = list(parameters)
+    swept = deep_merge(config["base"], spec.get("overrides", {}))  # a key the overrides add may be swept
+    for path in paths:
+        _check_path(swept, path, f"sweeps.{sweep}.parameters.{path}")
+    labels = _labels(paths)
+    existing = {}
+    for name, override in config.get("cases", {}).items():
+        existing.setdefault(repr(deep_merge(config["base"], override)), name)
+    points = []
+    for values in itertools.product(*(parameters[p] for p in paths)):
+        override = copy.deepcopy(spec.get("overrides", {}))
+        for path, value in zip(paths, values):
+            override = deep_merge(override, _nested(path, value))
+        name = "_".join([sweep] + [f"{labels[p]}-{_value_text(v)}" for p, v in zip(paths, values)])
+        if not CASE_NAME.match(name) or ".." in name:
+            raise ConfigError(f"config key 'sweeps.{sweep}.parameters': the case name '{name}' has characters "
+                              "a case name cannot hold (letters, digits, _ . + - only)")
+        name = existing.get(repr(deep_merge(config["base"], override)), name)
+        points.append(SweepPoint(name, dict(zip(paths, values))))
+    return points
+
+
+def sweep_overrides(config: dict, sweep: str) -> dict:
+    """``{case name: override of base}`` of a sweep's points that are not existing cases."""
+    spec = config["sweeps"][sweep]
+    out = {}
+    for point in sweep_points(config, sweep):
+        if point.case not in config.get("cases", {}):
+            override = copy.deepcopy(spec.get("overrides", {}))
+            for path, value in point.values.items():
+                override = deep_merge(override, _nested(path, value))
+            out[point.case] = override
+    return out
+
+
+def expand_sweeps(config: dict) -> dict:
+    """A copy of ``config`` with every sweep's points among its ``cases`` and each
+    figure with a ``sweep`` given that sweep's cases (in grid order). Expanding an
+    expanded config changes nothing."""
+    sweeps = config.get("sweeps") or {}
+    if not sweeps:
+        return config
+    from .schema import load_schema, validate_block  # the sweeps block is checked before it is used
+
+    validate_block(config, "sweeps", load_schema())
+    expanded = copy.deepcopy(config)
+    for sweep in sweeps:
+        for name, override in sweep_overrides(config, sweep).items():
+            if name in expanded["cases"] and expanded["cases"][name] != override:
+                raise ConfigError(f"config key 'sweeps.{sweep}': its case '{name}' is also a different case "
+                                  "in cases")
+            expanded["cases"][name] = override
+    for fig_id, figure in (expanded.get("figures") or {}).items():
+        if isinstance(figure, dict) and "sweep" in figure:
+            if figure["sweep"] not in sweeps:
+                raise ConfigError(f"config key 'figures.{fig_id}.sweep': unknown sweep '{figure['sweep']}'")
+            figure["cases"] = [p.case for p in sweep_points(config, figure["sweep"])]
+    return expanded
