@@ -65,8 +65,12 @@ html_theme_options = {
     "show_toc_level": 2,
     "secondary_sidebar_items": ["page-toc"],
 }
-html_static_path = []
+html_static_path = ["_static"]
+html_css_files = ["luckyao.css"]
 html_show_sourcelink = False
+# pages without sub-pages: no (empty) left sidebar, the width for their tables
+html_sidebars = {page: [] for page in ("index", "configuration", "results", "validation", "performance",
+                                       "api", "changelog")}
 
 
 sphinx_gallery_conf = {

@@ -135,7 +135,7 @@ def _rst_text(text: str) -> str:
         out.append(f"``{match.group(1)}``")
         last = match.end()
     out.append(SPECIAL.sub(r"\\\1", text[last:]))
-    return "".join(out).replace("<", "\\<")
+    return "".join(out)
 
 
 def split_unit(description: str) -> tuple[str, str]:
@@ -157,9 +157,9 @@ def default_study_value(config: dict, key_path: str):
     return node
 
 
-def key_rows(schema: dict, config: dict, prefix: str, node: dict) -> list[tuple[str, str, str, str, str, str]]:
-    """One row per key of a block: key, type, unit, default, required, description."""
-    rows = []
+def key_rows(schema: dict, config: dict, prefix: str, node: dict) -> list[tuple[str, str, str, str, str]]:
+    """One row per key of a block: key, type, unit, default (and whether it is required), description."""
+    rows = []  # (key, type, unit, default, description)
     required = set(node.get("required", ()))
     for key, child in node.get("properties", {}).items():
         path = f"{prefix}.{key}" if prefix else key
@@ -167,16 +167,19 @@ def key_rows(schema: dict, config: dict, prefix: str, node: dict) -> list[tuple[
         description, unit = split_unit(" ".join(str(child.get("description", "")).split()))
         if "default" in child:
             default = _literal(child["default"])
+        elif path in NESTED:
+            default = "see its section"
         else:
             try:
                 default = _literal(default_study_value(config, path)) + " (default study value)"
             except (KeyError, TypeError):
                 default = "derived (see description)" if "default:" in description else "—"
+        if key in required and "default" not in child:
+            default = "required" if default == "—" else default + "; required"
         text = _rst_text(description)
         if path in NESTED:
-            text += f" See :ref:`config-{_anchor(NESTED[path])}`."
-        rows.append((f"``{key}``", type_text(schema, child), _rst_text(unit), default,
-                     "yes" if key in required else "", text))
+            text = (text.rstrip(".") + ". " if text else "") + f"See :ref:`config-{_anchor(NESTED[path])}`."
+        rows.append((f"``{key}``", type_text(schema, child), _rst_text(unit), default, text))
     return rows
 
 
@@ -198,9 +201,8 @@ def reference_rst(schema: dict, config: dict) -> list[str]:
             if key_path == "cases":
                 lines += ["Each value is a mapping of the keys of :ref:`config-base` (only those that differ).", ""]
             continue
-        lines += [".. list-table::", "   :header-rows: 1", "   :widths: 14 16 8 14 6 42", "   :class: config-table",
-                  "", "   * - key", "     - type", "     - unit", "     - default", "     - required",
-                  "     - description"]
+        lines += [".. list-table::", "   :header-rows: 1", "   :widths: 17 15 9 17 42", "   :class: config-table",
+                  "", "   * - key", "     - type", "     - unit", "     - default", "     - description"]
         for row in rows:
             lines.append(f"   * - {row[0]}")
             lines += [f"     - {cell}" if cell else "     -" for cell in row[1:]]

@@ -19,8 +19,9 @@ FIXES = {
     "geometry.footprint_coverage": [("``n_samples``^2 points", "``n_samples`` squared points")],
     "scoring.integrated_images": [("(criterion, fraction, det, *item)", "(criterion, fraction, det, \\*item)"),
                                   ("(det, criterion x bin, *item)", "(det, criterion x bin, \\*item)")],
-    "cli": [("one subcommand per workflow step.", "one subcommand per workflow step::")],
 }
+USAGE = {"cli"}
+"""Module docstrings whose lines after the first paragraph are a usage block (shown literally)."""
 
 
 def _exists(path: str) -> bool:
@@ -67,9 +68,17 @@ def absolute_references(app, what, name, obj, options, lines):
     lines[:] = [ROLE.sub(absolute, line) for line in lines]
 
 
+def _matches(name: str, key: str) -> bool:
+    return name == key or name.endswith("." + key)
+
+
 def mend(app, what, name, obj, options, lines):
+    if (what == "module" and any(_matches(name, key) for key in USAGE) and "" in lines
+            and not any(line.rstrip().endswith("::") for line in lines)):
+        blank = lines.index("")
+        lines[:] = [*lines[:blank], "", "::", "", *("    " + line if line else "" for line in lines[blank + 1:])]
     for key, fixes in FIXES.items():
-        if name == key or name.endswith("." + key):
+        if _matches(name, key):
             text = "\n".join(lines)
             for old, new in fixes:
                 text = text.replace(old, new)
