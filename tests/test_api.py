@@ -1,4 +1,4 @@
-"""The Python tutorial (docs/tutorial.py) runs as written: a case run without Snakemake,
+"""The Python tutorial (docs/examples/tutorial.py) runs as written: a case run without Snakemake,
 its results read, its images written as FITS and read back."""
 
 import subprocess
@@ -9,7 +9,7 @@ REPO = Path(__file__).resolve().parents[1]
 
 
 def test_the_tutorial_runs_and_prints_what_it_promises(tmp_path):
-    result = subprocess.run([sys.executable, str(REPO / "docs" / "tutorial.py"), str(tmp_path)], cwd=REPO,
+    result = subprocess.run([sys.executable, str(REPO / "docs" / "examples" / "tutorial.py"), str(tmp_path)], cwd=REPO,
                             capture_output=True, text=True, timeout=900)
     assert result.returncode == 0, result.stderr[-3000:]
     lines = result.stdout.splitlines()

@@ -2,7 +2,7 @@
 
 The Python interface (``luckyao.api``, loaded on first use): ``open_case``,
 ``open_telemetry``, ``open_figure``, ``draw``, ``load_study``, ``run_case``,
-``export_fits``; a walk-through in ``docs/tutorial.py``.
+``export_fits``; a walk-through in ``docs/examples/tutorial.py``.
 """
 
 import importlib

@@ -10,7 +10,7 @@ and run one case from a config dict without Snakemake (for exploration).
 
 ``run_case`` runs the workflow's own steps (screens, reconstructor, AO commands, time
 loop, post-processing) as the workflow runs them, without Snakemake, so its numbers are
-the workflow's for the same config and seed. A walk-through: ``docs/tutorial.py``.
+the workflow's for the same config and seed. A walk-through: ``docs/examples/tutorial.py``.
 """
 
 import copy
