@@ -1,0 +1,245 @@
+"""The last ways in (issue 40): every config that cannot run to the end is refused before any
+job, naming the key or the file, by `luckyao check` and the workflow alike: names whole and
+short enough for a file name, detector and sweep names that cannot collide, seeds, labels
+matplotlib can draw, strict YAML (no alias bombs, duplicate keys or a top level that is not
+a mapping), bounded grids, and one pre-flight of memory and of the disk the study's files
+need together."""
+
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+import yaml
+
+from luckyao.cli import main
+from luckyao.studyspec.lucky import sweep_detectors
+from luckyao.studyspec.schema import ConfigError
+from luckyao.studyspec.study import validate_study
+from luckyao.studyspec.sweeps import expand_sweeps
+
+REPO = Path(__file__).resolve().parents[1]
+TINY = REPO / "tests" / "data" / "tiny.yaml"
+
+LIST_BOMB = "a0: &a0 [1, 2]\n" + "".join(f"a{i}: &a{i} [*a{i - 1}, *a{i - 1}]\n" for i in range(1, 30))
+MAPPING_BOMB = "d0: &d0 {x: 1}\n" + "".join(f"d{i}: &d{i} {{p: *d{i - 1}, q: *d{i - 1}}}\n" for i in range(1, 30))
+
+
+def tiny() -> dict:
+    return yaml.safe_load(TINY.read_text())
+
+
+def check(capsys, *paths) -> tuple[int, str]:
+    code = main(["check", *map(str, paths)])
+    captured = capsys.readouterr()
+    return code, captured.out + captured.err
+
+
+def with_sweep(parameters: dict) -> dict:
+    study = tiny()
+    study["sweeps"]["grid"] = {"parameters": parameters}
+    study["figures"]["grid"] = {"kind": "quality_vs_parameter", "sweep": "grid", "criteria": ["strehl"],
+                                "fractions": [1.0]}
+    return study
+
+
+# --- detector names (item 3) ---------------------------------------------------------------
+
+def test_a_detector_named_like_a_sweep_detector_is_refused_by_key():
+    """The tiny study's sweep names rn0.1_100ph: a listed detector of that name would be
+    replaced by the sweep's in the cases that get the sweep, a figure comparing two detectors
+    under one name."""
+    study = tiny()
+    assert "rn0.1_100ph" in sweep_detectors(study["lucky"])
+    study["lucky"]["detectors"]["rn0.1_100ph"] = {"photons_per_frame": 50, "read_noise_e": 3.0}
+    with pytest.raises(ConfigError, match=r"config key 'lucky\.detectors\.rn0\.1_100ph': the detector sweep names"):
+        validate_study(study)
+
+
+def test_sweep_detectors_that_would_share_a_name_are_refused_by_key():
+    study = tiny()
+    study["lucky"]["detector_sweep"]["photons_per_frame"] = {"min": 100, "max": 100.1, "levels": 3}  # all 100ph
+    with pytest.raises(ConfigError, match=r"config key 'lucky\.detector_sweep\.photons_per_frame': .*share the name "
+                                          r"'rn0\.1_100ph'"):
+        validate_study(study)
+    study = tiny()
+    study["lucky"]["detector_sweep"]["read_noise_e"] = [0.1, 0.1000001]  # rn0.1 both
+    with pytest.raises(ConfigError, match=r"config key 'lucky\.detector_sweep\.read_noise_e'"):
+        validate_study(study)
+
+
+def test_a_detector_sweep_is_bounded():
+    study = tiny()
+    study["lucky"]["detector_sweep"]["photons_per_frame"]["levels"] = 10**8
+    start = time.perf_counter()
+    with pytest.raises(ConfigError, match=r"config key 'lucky\.detector_sweep': .*100,000,000 detectors"):
+        validate_study(study)
+    assert time.perf_counter() - start < 5
+
+
+# --- names (items 8, 10) -------------------------------------------------------------------
+
+@pytest.mark.parametrize("name", ["good\n", "x\n", "caf\u00e9", "g\u00f6\u00f6d", "tab\t", "a" * 129, "a" * 300])
+@pytest.mark.parametrize("kind", ["case", "figure", "detector"])
+def test_a_name_is_matched_whole_short_and_ascii(kind, name):
+    """'good\\n' passed `$` (it matches before a final newline) and made folders with a newline
+    in their names; 300 characters failed mid-run (a file name holds 255 bytes)."""
+    study = tiny()
+    if kind == "case":
+        study["cases"][name] = {}
+        key = "cases"
+    elif kind == "figure":
+        study["figures"][name] = study["figures"]["longexp"]
+        key = "figures"
+    else:
+        study["lucky"]["detectors"][name] = {"photons_per_frame": None, "read_noise_e": 0.0}
+        key = "lucky.detectors"
+    with pytest.raises(ConfigError, match=rf"config key '{key}': .*(is not a safe name|characters long, more than "
+                                          r"the 128)"):
+        validate_study(study)
+
+
+def test_the_longest_name_allowed_runs_its_file_names():
+    study = tiny()
+    study["cases"]["a" * 128] = {}
+    validate_study(study)
+
+
+@pytest.mark.parametrize("where", ["sweep", "parameter"])
+def test_sweep_and_parameter_names_are_matched_whole(where):
+    study = with_sweep({"atmosphere.r0_500nm_m": [0.3]})
+    if where == "sweep":
+        study["sweeps"]["grid\n"] = study["sweeps"].pop("grid")
+        study["figures"]["grid"]["sweep"] = "grid\n"
+    else:
+        study["sweeps"]["grid"]["parameters"] = {"atmosphere.r0_500nm_m\n": [0.3]}
+    with pytest.raises(ConfigError, match=r"config key 'sweeps"):
+        validate_study(study)
+
+
+def test_a_sweep_point_named_longer_than_a_file_name_allows_is_refused_by_key():
+    study = with_sweep({"lgs.profile": ["range_gate" + "x" * 130]})
+    with pytest.raises(ConfigError, match=r"config key 'sweeps\.grid\.parameters': the grid point .* characters long"):
+        validate_study(study)
+
+
+# --- near-equal sweep values (item 11) ----------------------------------------------------------
+
+def test_sweep_values_that_would_share_a_name_are_refused_by_key():
+    """Names keep 6 significant digits: 0.121 and 0.1210001 were one case, drawn at two x."""
+    study = with_sweep({"atmosphere.r0_500nm_m": [0.121, 0.1210001, 0.3]})
+    with pytest.raises(ConfigError, match=r"config key 'sweeps\.grid\.parameters\.atmosphere\.r0_500nm_m': the values "
+                                          r"0\.121 and 0\.1210001 would share the case name 'grid_r0_500nm_m-0\.121'"):
+        validate_study(study)
+    validate_study(with_sweep({"atmosphere.r0_500nm_m": [0.121, 0.1211, 0.3]}))  # six digits apart: two cases
+
+
+# --- seeds, labels (item 10) -----------------------------------------------------------------
+
+def test_a_seed_outside_0_to_2_63_is_refused_by_key():
+    study = tiny()
+    study["seed"] = 2**63 - 1
+    validate_study(study)
+    for seed in (2**63, 2**64 + 5, -1):
+        study["seed"] = seed
+        with pytest.raises(ConfigError, match=r"config key 'seed'"):
+            validate_study(study)
+
+
+@pytest.mark.parametrize("label, drawable", [
+    (r"turned asterism", True), (r"$\alpha$ - $r_0$ (50%)", True), (r"costs $5", True),
+    (r"$\undefinedmacro$ - b", False), (r"a $x^$ b", False)])
+def test_a_label_matplotlib_cannot_draw_is_refused_by_key(label, drawable):
+    """A label with an undefined macro killed the figure job after every simulation."""
+    study = tiny()
+    study["figures"]["paired"]["pairs"][0]["label"] = label
+    if drawable:
+        validate_study(study)
+    else:
+        with pytest.raises(ConfigError, match=r"config key 'figures\.paired\.pairs\[0\]\.label': matplotlib cannot "
+                                              r"draw"):
+            validate_study(study)
+
+
+def test_two_pairs_of_one_label_are_refused_by_key():
+    study = tiny()
+    pairs = study["figures"]["paired"]["pairs"]
+    pairs.append(dict(pairs[0], a=pairs[0]["b"], b=pairs[0]["a"]))
+    with pytest.raises(ConfigError, match=r"config key 'figures\.paired\.pairs\[1\]\.label'"):
+        validate_study(study)
+
+
+# --- strict YAML, bounded grids (items 9, 10) ------------------------------------------------
+
+@pytest.mark.parametrize("overlay, message", [
+    ("seed: 1\nseed: 2\n", r"key 'seed' is written twice in one mapping \(lines 1 and 2\)"),
+    ("lucky:\n  fractions: [0.1]\n  fractions: [0.5]\n", r"key 'fractions' is written twice .*lines 2 and 3"),
+    ("- seed\n- 1\n", r"its top level is a list, not a mapping"),
+    ("7\n", r"its top level is a int, not a mapping"),
+    ("x: &x [*x]\n", r"a YAML alias refers to a value that holds it"),
+    (LIST_BOMB, r"holds more than 100,000 values once its YAML aliases"),
+    (MAPPING_BOMB, r"holds more than 100,000 values once its YAML aliases"),
+], ids=["duplicate", "nested-duplicate", "list", "number", "recursive-alias", "list-bomb", "mapping-bomb"])
+def test_check_refuses_a_config_file_naming_it(overlay, message, tmp_path, capsys):
+    path = tmp_path / "overlay.yaml"
+    path.write_text(overlay)
+    start = time.perf_counter()
+    code, output = check(capsys, TINY, path)
+    assert code == 1 and f"config file '{path}'" in output, output
+    assert len(output.strip().splitlines()) == 1 and __import__("re").search(message, output), output
+    assert time.perf_counter() - start < 10
+
+
+def test_yaml_merge_keys_and_the_studies_still_read():
+    from luckyao.studyspec.yamlfile import read_config_text
+
+    assert read_config_text("b: &b {x: 1, y: 2}\nc: {<<: *b, x: 3}\n", "t") == {"b": {"x": 1, "y": 2},
+                                                                              "c": {"x": 3, "y": 2}}
+    for path in [TINY, *sorted((REPO / "config").glob("*.yaml"))]:
+        assert read_config_text(path.read_text(), str(path)) == yaml.safe_load(path.read_text())
+
+
+def test_a_grid_too_large_is_refused_at_once_by_key():
+    """A grid of 10^6 points hung `check` for more than 10 minutes; 10^4 planned 40,202 jobs."""
+    values = [0.1 + 0.001 * i for i in range(100)]
+    for parameters, points in (({"atmosphere.r0_500nm_m": values, "atmosphere.outer_scale_m": values[:20]}, "2,000"),
+                               ({"atmosphere.r0_500nm_m": values, "atmosphere.outer_scale_m": values,
+                                 "camera.wavelength_m": values}, "1,000,000")):
+        start = time.perf_counter()
+        with pytest.raises(ConfigError, match=rf"config key 'sweeps\.grid\.parameters': a grid of {points} points "
+                                              r"\(100 x .* values.*\), more than the 1,000 a study may hold"):
+            validate_study(with_sweep(parameters))
+        assert time.perf_counter() - start < 5
+
+
+@pytest.mark.workflow
+@pytest.mark.parametrize("bomb", [LIST_BOMB, MAPPING_BOMB], ids=["list-bomb", "mapping-bomb"])
+def test_the_workflow_refuses_an_alias_bomb_before_reading_it(bomb, tmp_path):
+    """A 2 KB alias bomb hung the dry run (Snakemake's own config merge, or the checks)."""
+    folder = tmp_path / "study"
+    (folder / "config").mkdir(parents=True)
+    (folder / "config" / "config.yaml").write_text(TINY.read_text() + "junk:\n"
+                                                   + "".join(f"  {line}\n" for line in bomb.splitlines()))
+    command = [sys.executable, "-m", "snakemake", "-s", str(REPO / "Snakefile"), "-d", str(folder), "-n",
+               "--cores", "1"]
+    result = subprocess.run(command, capture_output=True, text=True, timeout=120)
+    assert result.returncode != 0
+    assert "luckyao: invalid study config: config file 'config/config.yaml': holds more than 100,000 values" \
+        in result.stderr, result.stderr[-2000:]
+
+
+@pytest.mark.workflow
+def test_run_sh_refuses_an_overlay_alias_bomb_before_snakemake_merges_it(tmp_path):
+    """Snakemake merges --configfile overlays itself, walking every path of a mapping bomb:
+    `bash run.sh study` (luckyao.jobs.live_run) reads them strictly first."""
+    folder = tmp_path / "study"
+    (folder / "config").mkdir(parents=True)
+    (folder / "config" / "config.yaml").write_text(TINY.read_text())
+    overlay = tmp_path / "bomb.yaml"
+    overlay.write_text("junk:\n" + "".join(f"  {line}\n" for line in MAPPING_BOMB.splitlines()))
+    command = [sys.executable, "-m", "luckyao.jobs.live_run", "-s", str(REPO / "Snakefile"), "-d", str(folder),
+               "-n", "--cores", "1", "--configfile", str(overlay)]
+    result = subprocess.run(command, capture_output=True, text=True, timeout=120)
+    assert result.returncode != 0
+    assert f"config file '{overlay}': holds more than 100,000 values" in result.stderr, result.stderr[-2000:]
