@@ -14,6 +14,8 @@ import pytest
 import yaml
 
 from luckyao.cli import main
+from luckyao.jobs import resources
+from luckyao.jobs.resources import preflight, study_jobs
 from luckyao.studyspec.lucky import sweep_detectors
 from luckyao.studyspec.schema import ConfigError
 from luckyao.studyspec.study import validate_study
@@ -243,3 +245,78 @@ def test_run_sh_refuses_an_overlay_alias_bomb_before_snakemake_merges_it(tmp_pat
     result = subprocess.run(command, capture_output=True, text=True, timeout=120)
     assert result.returncode != 0
     assert f"config file '{overlay}': holds more than 100,000 values" in result.stderr, result.stderr[-2000:]
+
+
+# --- one pre-flight, sizes (item 9) ---------------------------------------------------------------
+
+def huge(tmp_path) -> Path:
+    """duration_s 1e7: about 3 TB of memory for each simulation, the issue's 12,870 GB case."""
+    path = tmp_path / "huge.yaml"
+    path.write_text("turbulence: {duration_s: 1.0e+7}\nbase: {duration_s: 1.0e+7}\n")
+    return path
+
+
+def test_check_refuses_a_study_too_large_for_this_machine(tmp_path, capsys):
+    """`luckyao check` called it valid while the dry run refused it: one pre-flight now."""
+    code, output = check(capsys, TINY, huge(tmp_path))
+    assert code == 1 and "valid, " not in output, output
+    assert "study too large: config key 'turbulence': job turbulence screens_" in output, output
+    assert "study too large: config key 'cases.ltao': job simulate ltao needs about 3,2" in output, output
+    code, output = check(capsys, TINY)
+    assert code == 0 and "valid, 8 cases" in output
+
+
+@pytest.mark.workflow
+def test_the_dry_run_refuses_what_check_refuses(tmp_path):
+    folder = tmp_path / "study"
+    (folder / "config").mkdir(parents=True)
+    (folder / "config" / "config.yaml").write_text(TINY.read_text())
+    command = [sys.executable, "-m", "snakemake", "-s", str(REPO / "Snakefile"), "-d", str(folder), "-n",
+               "--cores", "1", "--configfile", str(huge(tmp_path))]
+    result = subprocess.run(command, capture_output=True, text=True, timeout=300)
+    assert result.returncode != 0
+    assert "luckyao: study too large: config key 'cases.ltao': job simulate ltao needs" in result.stderr, \
+        result.stderr[-2000:]
+
+
+def free_disk(monkeypatch, free_bytes: float) -> None:
+    monkeypatch.setattr(resources.shutil, "disk_usage", lambda folder: type("U", (), {"free": free_bytes})())
+
+
+def test_the_files_of_a_study_are_summed_against_the_free_disk(tmp_path, monkeypatch):
+    """With keep_frames every frame cube stays: the sum must fit, not each file alone (the
+    paper run with keep_frames, ~130 GB, was accepted with 40 GB free)."""
+    study = expand_sweeps(dict(tiny(), keep_frames=True))
+    cases = validate_study(study)
+    sizes = [size for _, _, _, output, size in study_jobs(study, cases) if output is not None]
+    free_disk(monkeypatch, max(sizes) * 1.01)
+    assert sum(sizes) > max(sizes) * 1.01
+    problems = preflight(study, cases, tmp_path, memory_bytes=1e15)
+    assert len(problems) == 1 and problems[0].startswith("config key 'keep_frames': the study's files not yet made "
+                                                         "need about"), problems
+    assert "every frame cube kept" in problems[0]
+    free_disk(monkeypatch, sum(sizes) * 1.01)
+    assert preflight(study, cases, tmp_path, memory_bytes=1e15) == []
+
+
+def test_frame_cubes_deleted_once_post_processed_count_as_many_as_run_at_once(tmp_path, monkeypatch):
+    study = expand_sweeps(tiny())
+    cases = validate_study(study)
+    jobs = [(job, size) for job, _, _, output, size in study_jobs(study, cases) if output is not None]
+    lasting = sum(size for job, size in jobs if not job.startswith("simulate "))
+    frames = sorted((size for job, size in jobs if job.startswith("simulate ")), reverse=True)
+    free_disk(monkeypatch, lasting + frames[0] + frames[1] / 2)
+    assert preflight(study, cases, tmp_path, memory_bytes=1e15, parallel_jobs=1) == []
+    problems = preflight(study, cases, tmp_path, memory_bytes=1e15, parallel_jobs=2)
+    assert len(problems) == 1 and "the 2 largest frame cubes at once" in problems[0]
+
+
+def test_a_file_already_made_needs_no_disk(tmp_path, monkeypatch):
+    study = expand_sweeps(dict(tiny(), keep_frames=True))
+    cases = validate_study(study)
+    for _, _, _, output, _ in study_jobs(study, cases):
+        if output is not None:
+            (tmp_path / output).parent.mkdir(parents=True, exist_ok=True)
+            (tmp_path / output).touch()
+    free_disk(monkeypatch, 0.0)
+    assert preflight(study, cases, tmp_path, memory_bytes=1e15) == []
