@@ -5,12 +5,15 @@ matplotlib can draw, strict YAML (no alias bombs, duplicate keys or a top level 
 a mapping), bounded grids, and one pre-flight of memory and of the disk the study's files
 need together."""
 
+import json
 import subprocess
 import sys
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
+import xarray as xr
 import yaml
 
 from luckyao.cli import main
@@ -320,3 +323,30 @@ def test_a_file_already_made_needs_no_disk(tmp_path, monkeypatch):
             (tmp_path / output).touch()
     free_disk(monkeypatch, 0.0)
     assert preflight(study, cases, tmp_path, memory_bytes=1e15) == []
+
+
+# --- draw and export say what they expected (item 10) ---------------------------------------------
+
+def titled(path: Path, title: str, **variables) -> Path:
+    xr.Dataset({name: ("x", np.asarray(values, dtype=float)) for name, values in variables.items()},
+               attrs={"title": title, "config_json": json.dumps({"duration_s": 1.0})}).to_netcdf(path)
+    return path
+
+
+def test_draw_says_it_expected_a_figures_data():
+    import luckyao
+
+    case = xr.Dataset({"strehl": ("x", [0.1])}, attrs={"title": "luckyao lucky imaging of case good",
+                                                        "config_json": json.dumps({"duration_s": 1.0})})
+    with pytest.raises(ValueError, match=r"luckyao\.draw: expected a figure's data \(figures/<id>\.nc\), got a "
+                                         r"case's lucky-imaging results"):
+        luckyao.draw(case)
+
+
+def test_export_says_it_expected_a_cases_lucky_results(tmp_path, capsys):
+    path = titled(tmp_path / "telemetry.nc", "luckyao telemetry of case good", frame_strehl=[0.1, 0.2])
+    code = main(["export", str(path), "--out", str(tmp_path / "x.fits")])
+    output = capsys.readouterr().err
+    assert code == 1 and "expected a case's lucky-imaging results (results/cases/<case>/lucky.nc), got a case's " \
+                         "telemetry" in output, output
+    assert "n_pixels" not in output and not (tmp_path / "x.fits").exists()
