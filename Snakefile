@@ -3,6 +3,24 @@
 #   snakemake --configfile config/paper.yaml     # paper fidelity: an overlay of what differs
 # The study config is validated (src/luckyao/studyspec/schema.yaml) before any job runs.
 
+# Every config file read strictly before Snakemake reads it (studyspec/yamlfile.py): YAML alias
+# bombs, duplicate keys and a top level that is not a mapping refused, naming the file.
+# (A mapping alias bomb given with --configfile is merged by Snakemake's own command line before
+# this file is read: `bash run.sh study` and `luckyao check` refuse it first.)
+import os
+import sys
+
+from luckyao.studyspec.schema import ConfigError as _ConfigError
+from luckyao.studyspec.yamlfile import read_config_file as _read_config_file
+
+try:
+    for _path in ["config/config.yaml", *workflow.overwrite_configfiles]:
+        if os.path.exists(_path):
+            _read_config_file(_path)
+except _ConfigError as _err:
+    sys.exit(f"luckyao: invalid study config: {_err}")
+
+
 configfile: "config/config.yaml"
 
 

@@ -266,3 +266,92 @@ def test_verify_refuses_unread_a_member_larger_than_any_archived_file(tmp_path, 
     path.write_bytes(gzip.compress(header.tobuf(format=tarfile.GNU_FORMAT) + bytes(4096)))
     code, output = verify(capsys, path)
     assert code == 1 and "member results/cases/good/lucky.nc claims 2,147,483,649 bytes" in output
+
+
+def appended(archive: Path, path: Path, *infos: tuple[tarfile.TarInfo, bytes]) -> Path:
+    """A copy of ``archive`` with members appended under its top folder, ``SHA256SUMS`` as archived."""
+    shutil.copy(archive, path)
+    top = archive.name.removesuffix(".tar")
+    with tarfile.open(path, "a") as tar:
+        for info, data in infos:
+            info.name = f"{top}/{info.name}"
+            tar.addfile(info, io.BytesIO(data) if data else None)
+    return path
+
+
+@pytest.mark.workflow
+@pytest.mark.parametrize("kind", ["symlink", "hardlink", "fifo"])
+def test_verify_refuses_a_link_or_other_non_regular_member(kind, archive, tmp_path, capsys):
+    """A link to /etc/passwd added to the archive passed: verify skipped every non-file member."""
+    info = tarfile.TarInfo("results/cases/good/extra.nc")
+    info.type = {"symlink": tarfile.SYMTYPE, "hardlink": tarfile.LNKTYPE, "fifo": tarfile.FIFOTYPE}[kind]
+    info.linkname = "/etc/passwd" if kind != "fifo" else ""
+    code, output = verify(capsys, appended(archive, tmp_path / "a.tar", (info, b"")), "--no-rerun")
+    assert code == 1, output
+    expected = {"symlink": "is a symbolic link to '/etc/passwd'", "hardlink": "is a hard link to '/etc/passwd'",
+                "fifo": "is a device or FIFO"}[kind]
+    assert f"member results/cases/good/extra.nc {expected}" in output, output
+
+
+@pytest.mark.workflow
+def test_verify_refuses_a_member_archived_twice(archive, tmp_path, capsys):
+    """Two copies of one name: checked on the last, extracted from the first. Refused."""
+    data = read_members(archive)["results/cases/good/lucky.nc"]
+    info = tarfile.TarInfo("results/cases/good/lucky.nc")
+    info.size = len(data)
+    code, output = verify(capsys, appended(archive, tmp_path / "a.tar", (info, data)), "--no-rerun")
+    assert code == 1 and "member results/cases/good/lucky.nc is archived twice" in output, output
+
+
+@pytest.mark.workflow
+@pytest.mark.parametrize("folder", ["study", "other"])
+def test_verify_refuses_a_workdir_that_is_a_study_or_not_empty_untouched(folder, study, archive, tmp_path, capsys):
+    """--workdir at a study folder overwrote its config/config.yaml and reran jobs into its results/."""
+    if folder == "other":
+        workdir = tmp_path / "other"
+        workdir.mkdir()
+        (workdir / "notes.txt").write_text("mine")
+    else:
+        workdir = study
+    before = sorted((p.relative_to(workdir), p.stat().st_mtime_ns) for p in workdir.rglob("*"))
+    code, output = verify(capsys, archive, "--case", "good", "--workdir", workdir)
+    assert code == 1, output
+    assert f"--workdir '{workdir}' is {'a study folder' if folder == 'study' else 'not empty'}" in output, output
+    assert sorted((p.relative_to(workdir), p.stat().st_mtime_ns) for p in workdir.rglob("*")) == before
+
+
+def test_verify_reads_many_large_benchmark_members_in_bounded_memory(tmp_path):
+    """100 benchmark members of 16 MiB each (an 85 MB file) peaked at 1.79 GB: each was held.
+    A benchmark table is ~200 bytes: one over 64 KiB is refused unread."""
+    bomb, size = tmp_path / "bench.tar.gz", 16 << 20
+    with tarfile.open(bomb, "w:gz", compresslevel=1) as tar:
+        tar.addfile(tarfile.TarInfo(f"bench/{CHECKSUMS}"), io.BytesIO(b""))
+        for i in range(100):
+            info = tarfile.TarInfo(f"bench/results/benchmarks/simulate/case{i}.tsv")
+            info.size = size
+            tar.addfile(info, io.BufferedReader(Zeros(size)))
+    script = ("import resource, sys; from luckyao.cli import main; import luckyao.archive.verify; "
+              "before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss; code = main(['verify', sys.argv[1]]); "
+              "print(code, resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - before)")
+    result = subprocess.run([sys.executable, "-c", script, str(bomb)], capture_output=True, text=True, timeout=600)
+    code, growth_kib = map(int, result.stdout.split()[-2:])
+    assert code == 1 and "claims 16,777,216 bytes, more than verify reads (65,536)" in result.stderr, result.stderr
+    assert growth_kib < 100_000, f"peak memory grew by {growth_kib / 1024:.0f} MiB"
+
+
+def test_verify_bounds_the_members_it_holds_together_and_their_number(tmp_path, monkeypatch, capsys):
+    from luckyao.archive import verify as verify_module
+
+    path = tmp_path / "many.tar"
+    with tarfile.open(path, "w") as tar:
+        for i in range(12):
+            info = tarfile.TarInfo(f"many/results/benchmarks/simulate/case{i}.tsv")
+            info.size = 1000
+            tar.addfile(info, io.BytesIO(bytes(1000)))
+    monkeypatch.setattr(verify_module, "HELD_LIMIT_BYTES", 5000)
+    code, output = verify(capsys, path)
+    assert code == 1 and "benchmark members hold more than 5,000 bytes together" in output, output
+    monkeypatch.setattr(verify_module, "HELD_LIMIT_BYTES", 1 << 20)
+    monkeypatch.setattr(verify_module, "MEMBER_COUNT_LIMIT", 10)
+    code, output = verify(capsys, path)
+    assert code == 1 and "has more than 10 members" in output, output

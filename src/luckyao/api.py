@@ -68,7 +68,9 @@ def draw(data: xr.Dataset, title: str | None = None):
     """The matplotlib Figure of a figure's dataset (:func:`open_figure`), drawn as the
     workflow draws it."""
     from .figures import FIGURE_KINDS
+    from .io.kinds import require_kind
 
+    require_kind(data, "luckyao figure ", "luckyao.draw")
     settings = json.loads(data.attrs["config_json"])
     return FIGURE_KINDS[settings["kind"]][1](data, title or str(data.attrs.get("title", "")).split()[-1])
 

@@ -1,6 +1,6 @@
 """Command-line interface: one subcommand per workflow step.
 
-    luckyao check CONFIG [OVERLAY ...]
+    luckyao check CONFIG [OVERLAY ...] [--study-dir DIR] [--mem-mb N]
     luckyao turbulence --spec JSON --screens S.npy --metadata S.nc
     luckyao simulate --case JSON --name NAME --seed N --screens S.npy --screens-metadata S.nc
                      [--reconstructor R.nc] [--commands C.nc] [--calibration W.nc] [--lgs-telemetry T.nc]
@@ -33,24 +33,28 @@ def _setup_logging() -> None:
 
 
 def cmd_check(args) -> int:
-    """One line: valid, or one line per problem naming its key (no traceback)."""
+    """One line: valid, or one line per problem naming its key (no traceback): the workflow's
+    own pre-flight (``jobs.resources.checked_study``), so what its dry run refuses is refused
+    here, for the study folder ``--study-dir``."""
+    from .jobs.resources import StudyTooLarge, checked_study, machine_memory_bytes
     from .studyspec.schema import ConfigError
-    from .studyspec.study import load_study, plausibility_warnings, unused_cases
+    from .studyspec.study import plausibility_warnings, read_study, unused_cases
 
+    files = " + ".join(args.config)
+    memory = max(machine_memory_bytes(), 1e6 * (args.mem_mb or 0))
     try:
-        study, cases = load_study(*args.config)
+        study, cases = checked_study(read_study(*args.config), args.study_dir, memory)
     except ConfigError as err:
+        what = "study too large" if isinstance(err, StudyTooLarge) else "invalid"
         for problem in str(err).splitlines():
-            print(f"{' + '.join(args.config)}: {problem}", file=sys.stderr)
+            print(f"{files}: {what}: {problem}", file=sys.stderr)
         return 1
     for warning in plausibility_warnings(cases):
-        print(f"{' + '.join(args.config)}: warning: {warning}", file=sys.stderr)
-    from .studyspec.sweeps import expand_sweeps
-
-    unused = unused_cases(expand_sweeps(study))
+        print(f"{files}: warning: {warning}", file=sys.stderr)
+    unused = unused_cases(study)
     if unused:
-        print(f"{' + '.join(args.config)}: warning: no figure shows the cases {', '.join(unused)}", file=sys.stderr)
-    print(f"{' + '.join(args.config)}: valid, {len(cases)} cases")
+        print(f"{files}: warning: no figure shows the cases {', '.join(unused)}", file=sys.stderr)
+    print(f"{files}: valid, {len(cases)} cases")
     return 0
 
 
@@ -263,8 +267,12 @@ def build_parser() -> argparse.ArgumentParser:
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = parser.add_subparsers(dest="command", required=True)
 
-    p = sub.add_parser("check", help="validate a study config (later files are merged over earlier ones)")
+    p = sub.add_parser("check", help="validate a study config (later files are merged over earlier ones) and check "
+                                     "that its jobs fit this machine, as the workflow does before any job")
     p.add_argument("config", nargs="+")
+    p.add_argument("--study-dir", default=".", help="the study folder whose free disk is checked (default: here)")
+    p.add_argument("--mem-mb", type=int, help="memory of the machine the jobs run on [MB], if larger than this one's "
+                                              "(as Snakemake's --resources mem_mb=N)")
     p.set_defaults(func=cmd_check)
 
     p = sub.add_parser("turbulence", help="generate the shared normalised phase screens")

@@ -7,9 +7,9 @@ import sys
 from luckyao.jobs.code_deps import step_sources
 from luckyao.io.datasets import atomic_path
 from luckyao.jobs.live_run import hold_shared
-from luckyao.jobs.resources import (commands_memory_bytes, lucky_memory_bytes, machine_memory_bytes, mem_mb,
-                                     preflight, reconstructor_memory_bytes, simulate_memory_bytes,
-                                     slopes_memory_bytes, turbulence_memory_bytes)
+from luckyao.jobs.resources import (StudyTooLarge, checked_study, commands_memory_bytes, lucky_memory_bytes,
+                                     machine_memory_bytes, mem_mb, reconstructor_memory_bytes,
+                                     simulate_memory_bytes, slopes_memory_bytes, turbulence_memory_bytes)
 from luckyao.io.hashing import canonical_json, sha256
 from luckyao.studyspec.lucky import SIGNAL_KINDS, lucky_settings, sweep_detectors
 from luckyao.studyspec.products import (calibration_key, calibration_spec, commands_key, commands_spec, lgs_twin,
@@ -17,22 +17,23 @@ from luckyao.studyspec.products import (calibration_key, calibration_spec, comma
                                    turbulence_spec)
 from luckyao.studyspec.resolved import imaged_targets
 from luckyao.studyspec.schema import ConfigError
-from luckyao.studyspec.study import plausibility_warnings, unused_cases, validate_study
-from luckyao.studyspec.sweeps import expand_sweeps, sweep_points
+from luckyao.studyspec.study import plausibility_warnings, unused_cases
+from luckyao.studyspec.sweeps import sweep_points
 
 RUN_LOCK = hold_shared()  # this study folder is in use until this Snakemake exits (run.sh cleans up only when free)
 
-try:
-    STUDY = expand_sweeps(config)  # a sweep's grid points become cases
-    CASES = validate_study(STUDY)
-except ConfigError as err:
-    sys.exit("\n".join(f"luckyao: invalid study config: {problem}" for problem in str(err).splitlines()))
-# Before any job: every job's memory within this machine's (or --resources mem_mb=N, e.g. a
-# cluster's nodes), every file it writes within the free disk (src/luckyao/jobs/resources.py).
+# Before any job, the pre-flight `luckyao check` runs too (src/luckyao/jobs/resources.py): the
+# config validated (a sweep's grid points become cases), every job's memory within this
+# machine's (or --resources mem_mb=N, e.g. a cluster's nodes), the files not yet made within
+# the free disk together.
 GIVEN_MEM_MB = getattr(workflow.global_resources.get("mem_mb"), "value", None)  # a snakemake Resource
 MEMORY_LIMIT_BYTES = max(machine_memory_bytes(), 1e6 * GIVEN_MEM_MB if isinstance(GIVEN_MEM_MB, (int, float)) else 0)
-if problems := preflight(STUDY, CASES, memory_bytes=MEMORY_LIMIT_BYTES):
-    sys.exit("\n".join(f"luckyao: study too large: {problem}" for problem in problems))
+try:
+    STUDY, CASES = checked_study(config, ".", MEMORY_LIMIT_BYTES,
+                                 workflow.cores if isinstance(workflow.cores, int) else None)
+except ConfigError as err:
+    what = "study too large" if isinstance(err, StudyTooLarge) else "invalid study config"
+    sys.exit("\n".join(f"luckyao: {what}: {problem}" for problem in str(err).splitlines()))
 for warning in plausibility_warnings(CASES):
     print(f"luckyao: warning: {warning}", file=sys.stderr)
 if unused_cases(STUDY):

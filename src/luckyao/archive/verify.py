@@ -3,8 +3,12 @@
 The archive is read as a stream, one member at a time in 1 MiB pieces: every
 member is hashed without being held, so memory stays bounded whatever the
 archive holds (a member claiming more than ``MEMBER_LIMIT_BYTES`` is refused
-unread, a small one (config, manifest, lock, benchmarks) more than
-``TEXT_LIMIT_BYTES`` too). Every checksum is checked against ``SHA256SUMS``;
+unread, a small one (config, manifest, lock) more than ``TEXT_LIMIT_BYTES`` too, a
+benchmark table more than ``BENCHMARK_LIMIT_BYTES``, the small members together more
+than ``HELD_LIMIT_BYTES``, more than ``MEMBER_COUNT_LIMIT`` members, and tar's own
+extended headers together more than ``HEADER_LIMIT_BYTES``). Only regular files (and
+folders) are read: a link or any other kind of member is refused, as is a name
+archived twice (a tar file may hold two copies; which one is "the" member?). Every checksum is checked against ``SHA256SUMS``;
 warnings follow when this environment or code differs from the archived one;
 then one case (by default the one whose jobs took least time when archived), or
 every case, is rerun with Snakemake from the archived config, and every
@@ -15,6 +19,10 @@ What this proves: the checksums show that no member changed after archiving
 unless ``SHA256SUMS`` was rewritten with it (they are not a signature); the
 rerun shows that this code, from the archived config, remakes the rerun cases'
 numbers. A case that is not rerun is covered by the checksums alone.
+
+The rerun's folder (``--workdir``) must be new, empty, or one an earlier verify made (it
+holds ``WORKDIR_MARKER``): verify writes ``config/config.yaml`` and ``results/`` there, so a
+study folder or any other folder with files in it is refused untouched.
 """
 
 import hashlib
@@ -31,19 +39,50 @@ from pathlib import Path
 
 import numpy as np
 import xarray as xr
-import yaml
 
 from .create import (CASE_FILES, CHECKSUMS, FORMAT, REPO, REQUIRED, ArchiveError, case_jobs, package_differences,
                      parse_lock, runtime_packages)
 from ..studyspec.resolved import frame_count
 from ..studyspec.study import validate_study
+from ..studyspec.yamlfile import read_config_text
 from ..io.datasets import code_version
 
 CHUNK_BYTES = 1 << 20
 MEMBER_LIMIT_BYTES = 2 << 30
 """Largest member read (a paper-fidelity ``lucky.nc`` or ``telemetry.nc``: under 100 MB)."""
 TEXT_LIMIT_BYTES = 16 << 20
-"""Largest member held in memory: config, manifest, lock, checksums, code diff, benchmarks."""
+"""Largest member held in memory: config, manifest, lock, checksums, code diff."""
+BENCHMARK_LIMIT_BYTES = 64 << 10
+"""Largest benchmark table held (a Snakemake benchmark: one header and one row, ~200 bytes)."""
+HELD_LIMIT_BYTES = 64 << 20
+"""Most bytes of all the members held together."""
+MEMBER_COUNT_LIMIT = 100_000
+"""Most members read (a paper-fidelity study's archive: a few hundred)."""
+HEADER_LIMIT_BYTES = 16 << 20
+"""Most bytes of tar's extended headers (long names, pax records) together, read by tarfile whole."""
+WORKDIR_MARKER = ".luckyao-verify"
+"""The file that marks a folder verify made for a rerun (verify may reuse it)."""
+
+
+def _held_limit(name: str) -> int:
+    return BENCHMARK_LIMIT_BYTES if name.startswith("results/benchmarks/") else TEXT_LIMIT_BYTES
+
+
+class _BoundedTarInfo(tarfile.TarInfo):
+    """A member header whose extended headers are bounded before tarfile reads them whole,
+    and no GNU sparse member (its map is read block after block)."""
+
+    def _proc_member(self, tar):
+        if self.type == tarfile.GNUTYPE_SPARSE:
+            raise ArchiveError(f"archive '{tar.name}': member {self.name} is a sparse file; verify reads only "
+                               "regular files")
+        if self.type in (tarfile.GNUTYPE_LONGNAME, tarfile.GNUTYPE_LONGLINK, tarfile.XHDTYPE, tarfile.XGLTYPE,
+                         tarfile.SOLARIS_XHDTYPE):
+            tar.luckyao_header_bytes = getattr(tar, "luckyao_header_bytes", 0) + self.size
+            if tar.luckyao_header_bytes > HEADER_LIMIT_BYTES:
+                raise ArchiveError(f"archive '{tar.name}': its extended tar headers hold more than "
+                                   f"{HEADER_LIMIT_BYTES:,} bytes together (names, pax records); not read")
+        return super()._proc_member(tar)
 
 
 def _held(name: str) -> bool:
@@ -52,14 +91,26 @@ def _held(name: str) -> bool:
 
 
 def _members(path):
-    """(name without the top folder, size, chunk iterator) of every file member, streamed."""
-    with tarfile.open(path, "r|*") as tar:
-        for info in tar:
-            if not info.isfile():
+    """(name without the top folder, chunk iterator) of every file member, streamed; an
+    ArchiveError for a link or other non-regular member, or past a limit."""
+    with tarfile.open(path, "r|*", tarinfo=_BoundedTarInfo) as tar:
+        count = 0
+        while (info := tar.next()) is not None:
+            tar.members.clear()  # tarfile keeps every header read: one at a time is enough here
+            count += 1
+            if count > MEMBER_COUNT_LIMIT:
+                raise ArchiveError(f"archive '{path}' has more than {MEMBER_COUNT_LIMIT:,} members; not read further")
+            if info.isdir():
                 continue
             name = info.name.partition("/")[2]
-            if info.size > MEMBER_LIMIT_BYTES or (_held(name) and info.size > TEXT_LIMIT_BYTES):
-                limit = TEXT_LIMIT_BYTES if _held(name) else MEMBER_LIMIT_BYTES
+            if not info.isreg():
+                kind = ("a symbolic link" if info.issym() else "a hard link" if info.islnk() else
+                        "a device or FIFO, not a file")
+                raise ArchiveError(f"archive '{path}': member {name or info.name} is {kind}"
+                                   f"{' to ' + repr(info.linkname) if info.issym() or info.islnk() else ''}; "
+                                   "an archive holds regular files only")
+            limit = _held_limit(name) if _held(name) else MEMBER_LIMIT_BYTES
+            if info.size > limit:
                 raise ArchiveError(f"archive '{path}': member {name} claims {info.size:,} bytes, more than "
                                    f"verify reads ({limit:,}); not read")
             stream = tar.extractfile(info)
@@ -69,18 +120,25 @@ def _members(path):
 def scan_members(path) -> tuple[dict[str, str], dict[str, bytes]]:
     """Name -> sha256 of every file member of the archive ``path``, and name -> bytes of
     the small members verify reads (``_held``)."""
-    digests, held = {}, {}
+    digests, held, held_bytes = {}, {}, 0
     try:
         for name, chunks in _members(path):
+            if name in digests:
+                raise ArchiveError(f"archive '{path}': member {name} is archived twice; an archive holds each "
+                                   "name once")
             digest, data = hashlib.sha256(), bytearray()
             for chunk in chunks:
                 digest.update(chunk)
                 if _held(name):
                     data += chunk
+                    if held_bytes + len(data) > HELD_LIMIT_BYTES:
+                        raise ArchiveError(f"archive '{path}': its config, lock, manifest and benchmark members "
+                                           f"hold more than {HELD_LIMIT_BYTES:,} bytes together; not read further")
             digests[name] = digest.hexdigest()
             if _held(name):
                 held[name] = bytes(data)
-    except (OSError, EOFError, tarfile.TarError, zlib.error) as err:
+                held_bytes += len(data)
+    except (OSError, EOFError, tarfile.TarError, zlib.error, RecursionError) as err:
         raise ArchiveError(f"archive '{path}' is missing, not a tar file or damaged ({err})") from err
     return digests, held
 
@@ -265,6 +323,21 @@ def rerun_cases(held: dict[str, bytes], rerun: list[str], workdir: Path, snakefi
     return True
 
 
+def claim_workdir(workdir: Path) -> None:
+    """Make ``workdir`` the rerun's folder (marked with ``WORKDIR_MARKER``): it must be new,
+    empty, or marked by an earlier verify; an ArchiveError, before anything is written, for a
+    file, a study folder or any other folder holding files."""
+    if workdir.exists() and not workdir.is_dir():
+        raise ArchiveError(f"--workdir '{workdir}' is a file, not a folder")
+    if workdir.is_dir() and not (workdir / WORKDIR_MARKER).is_file() and any(workdir.iterdir()):
+        study = [p for p in ("Snakefile", "config", "results", ".snakemake") if (workdir / p).exists()]
+        what = f"a study folder (it has {', '.join(study)})" if study else "not empty"
+        raise ArchiveError(f"--workdir '{workdir}' is {what}: the rerun writes config/config.yaml and results/ "
+                           "there; give a new or empty folder (or one an earlier verify made)")
+    workdir.mkdir(parents=True, exist_ok=True)
+    (workdir / WORKDIR_MARKER).write_text("a folder luckyao verify made for a rerun; verify may reuse it\n")
+
+
 def _cases(names: list[str]) -> str:
     return f"case '{names[0]}'" if len(names) == 1 else f"cases {', '.join(names)}"
 
@@ -288,7 +361,7 @@ def verify(path, case=None, workdir=None, rtol=0.0, atol=0.0, cores=2, snakefile
     manifest, names, held = checked
     if not rerun:
         return True
-    study = yaml.safe_load(held["config.yaml"])
+    study = read_config_text(held["config.yaml"], f"config.yaml of archive '{path}'")
     cases = validate_study(study)
     seconds = None
     if all_cases:
@@ -305,6 +378,7 @@ def verify(path, case=None, workdir=None, rtol=0.0, atol=0.0, cores=2, snakefile
         raise ArchiveError(f"no Snakefile at '{snakefile}': give the checkout's with --snakefile")
     scratch = workdir is None
     workdir = Path(tempfile.mkdtemp(prefix="luckyao-verify-") if scratch else workdir)
+    claim_workdir(workdir)
     keep = False  # a failed or differing rerun is kept for inspection
     try:
         echo(f"rerun: {_cases(chosen)}" + (f" (its jobs took {seconds:.0f} s when archived)" if seconds else "")

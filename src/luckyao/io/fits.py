@@ -16,6 +16,7 @@ import numpy as np
 import xarray as xr
 
 from .datasets import open_dataset
+from .kinds import require_kind
 
 
 def _provenance_cards(lucky: xr.Dataset) -> list[tuple]:
@@ -134,6 +135,7 @@ def export_fits(lucky_path, out_path, detectors=None) -> int:
     from astropy.io import fits
 
     lucky = open_dataset(lucky_path, "lucky")
+    require_kind(lucky, "luckyao lucky imaging of case ", f"export of '{lucky_path}'")
     if "registration" in lucky.dims:  # the baseline's images (cog)
         lucky = lucky.sel(registration="cog")
     primary = fits.PrimaryHDU()

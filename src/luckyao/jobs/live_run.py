@@ -73,9 +73,31 @@ def clean_if_idle(folder: Path, echo=print) -> int:
     return fd
 
 
+def refuse_unsafe_overlays(argv: list[str]) -> None:
+    """Exit naming the file when a ``--configfile`` overlay is not a config Snakemake can be given
+    safely (``studyspec.yamlfile``: an alias bomb would hang Snakemake's own merge of it)."""
+    from snakemake.cli import parse_args
+
+    from ..studyspec.schema import ConfigError
+    from ..studyspec.yamlfile import read_config_file
+
+    try:
+        with contextlib.redirect_stderr(io.StringIO()), contextlib.redirect_stdout(io.StringIO()):
+            _, args = parse_args(argv)
+    except (SystemExit, Exception):  # noqa: BLE001 - any parse failure: Snakemake itself reports it
+        return
+    try:
+        for path in args.configfile or []:
+            if os.path.exists(path):
+                read_config_file(path)
+    except ConfigError as err:
+        sys.exit(f"luckyao: invalid study config: {err}")
+
+
 def main(argv: list[str]) -> None:
     """``bash run.sh study ARGS``: clean up if the study folder is idle, then become
     ``python -m snakemake ARGS`` holding the folder's run lock."""
+    refuse_unsafe_overlays(argv)
     folder = study_folder(argv)
     if folder is not None and folder.is_dir():
         fd = clean_if_idle(folder, echo=lambda line: print(line, file=sys.stderr))

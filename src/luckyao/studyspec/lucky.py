@@ -35,16 +35,26 @@ def registrations(lucky: dict) -> list[str]:
     return list(_lucky_value(lucky, "registration"))
 
 
-def sweep_detectors(lucky: dict) -> dict:
-    """The named detectors of ``lucky.detector_sweep`` (none without it): every read noise
-    x ``levels`` photon counts per frame, log-spaced from ``min`` to ``max``."""
+MAX_SWEEP_DETECTORS = 1000
+"""Most detectors of a detector sweep (read noises x levels; the paper's: 18)."""
+
+
+def sweep_detector_list(lucky: dict) -> list[tuple[str, dict]]:
+    """(name, detector) of every point of ``lucky.detector_sweep`` (none without it), in order:
+    every read noise x ``levels`` photon counts per frame, log-spaced from ``min`` to ``max``."""
     sweep = lucky.get("detector_sweep")
     if sweep is None:
-        return {}
+        return []
     grid = sweep["photons_per_frame"]
     photons = np.geomspace(grid["min"], grid["max"], grid["levels"])
-    return {sweep_name(read_noise, n): {"photons_per_frame": float(n), "read_noise_e": float(read_noise)}
-            for read_noise in sweep["read_noise_e"] for n in photons}
+    return [(sweep_name(read_noise, n), {"photons_per_frame": float(n), "read_noise_e": float(read_noise)})
+            for read_noise in sweep["read_noise_e"] for n in photons]
+
+
+def sweep_detectors(lucky: dict) -> dict:
+    """The named detectors of ``lucky.detector_sweep`` (:func:`sweep_detector_list`; their
+    names distinct and none of ``lucky.detectors``'s: ``study.validate_study``)."""
+    return dict(sweep_detector_list(lucky))
 
 
 def sweep_name(read_noise_e: float, photons_per_frame: float) -> str:

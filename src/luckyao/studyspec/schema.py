@@ -6,6 +6,7 @@ config against it: every problem a ``ConfigError`` naming its key
 import copy
 import functools
 import math
+import re
 from pathlib import Path
 
 import jsonschema
@@ -54,10 +55,27 @@ def _key_path(prefix: str, error: jsonschema.ValidationError) -> str:
 
 def _message(error: jsonschema.ValidationError) -> str:
     """The schema's message, or for a name (``definitions.name``) what a safe name is."""
-    if error.validator == "pattern" and error.schema.get("description", "").startswith("a case, figure or detector"):
-        return (f"{error.instance!r} is not a safe name (a letter or digit, then letters, digits, _ . + -; "
-                "never '..'): names become file names and command-line words")
+    if error.schema.get("description", "").startswith("a case, figure or detector"):
+        problem = name_problem(error.instance)
+        if problem is not None:
+            return problem
     return error.message
+
+
+def name_problem(name) -> str | None:
+    """Why ``name`` cannot be a case, figure or detector name (``definitions.name`` of the
+    schema: the whole name matched, printable ASCII, at most ``maxLength`` characters), or
+    None when it can."""
+    spec = _parsed_yaml(SCHEMA_PATH)["definitions"]["name"]
+    if not isinstance(name, str):
+        return f"{name!r} is not a name (a string)"
+    if len(name) > spec["maxLength"]:
+        return (f"'{name[:24]}...' is {len(name)} characters long, more than the {spec['maxLength']} a name may "
+                "have: names become file names (255 bytes at most, with the workflow's suffixes)")
+    if not re.search(spec["pattern"], name):
+        return (f"{name!r} is not a safe name (a letter or digit, then letters, digits, _ . + -; "
+                "never '..'): names become file names and command-line words")
+    return None
 
 
 def validate_keys(instance, schema: dict, prefix: str) -> None:

@@ -5,13 +5,13 @@ checked against the schema (``schema.yaml``) and a few cross-key rules before an
 the first problem of each case and figure is reported as a ``ConfigError`` naming the key.
 """
 
-import yaml
-
-from .lucky import SIGNAL_KINDS, error_blocks
+from .lucky import MAX_SWEEP_DETECTORS, SIGNAL_KINDS, error_blocks, sweep_detector_list
 from .resolved import criteria_of, frame_count
 from .scaling import derive_size_defaults
 from .schema import ConfigError, check_finite, deep_merge, load_schema, validate_keys
 from .sweeps import expand_sweeps
+from .yamlfile import read_config_file
+
 
 def _check_case(name: str, case: dict, turbulence: dict) -> None:
     where = f"cases.{name}"
@@ -76,6 +76,10 @@ def validate_study(config: dict, schema: dict | None = None) -> dict:
     validate_keys(config, schema, "")
     case_schema = dict(schema["definitions"]["case"], definitions=schema["definitions"])
     cases, problems = {}, []
+    try:
+        _check_detectors(config["lucky"])
+    except ConfigError as err:
+        problems.append(str(err))
     for name, override in config["cases"].items():
         resolved = deep_merge(config["base"], override)
         try:
@@ -101,6 +105,52 @@ def validate_study(config: dict, schema: dict | None = None) -> dict:
     return cases
 
 
+def _check_detectors(lucky: dict) -> None:
+    """Every detector one name: the detector sweep's generated names (``rn<read noise>_<photons>ph``)
+    distinct, and none of them a name of ``lucky.detectors`` (a case given the sweep would
+    silently get the sweep's detector under the listed one's name)."""
+    sweep = lucky.get("detector_sweep")
+    if sweep is None:
+        return
+    count = len(sweep["read_noise_e"]) * sweep["photons_per_frame"]["levels"]
+    if count > MAX_SWEEP_DETECTORS:
+        raise ConfigError(f"config key 'lucky.detector_sweep': {len(sweep['read_noise_e'])} read noises x "
+                          f"{sweep['photons_per_frame']['levels']} levels make {count:,} detectors, more than the "
+                          f"{MAX_SWEEP_DETECTORS:,} a study may hold (each one's partial sums held in every lucky job "
+                          "it applies to)")
+    seen = {}
+    for name, spec in sweep_detector_list(lucky):
+        if name in seen:
+            key = "photons_per_frame" if seen[name]["read_noise_e"] == spec["read_noise_e"] else "read_noise_e"
+            unit = "photons" if key == "photons_per_frame" else "e-"
+            raise ConfigError(f"config key 'lucky.detector_sweep.{key}': two of its detectors would share the name "
+                              f"'{name}' ({seen[name][key]:.9g} and {spec[key]:.9g} {unit}; names keep 3 significant "
+                              "digits of the photons and 6 of the read noise): make its values differ more")
+        seen[name] = spec
+        if name in lucky["detectors"]:
+            raise ConfigError(f"config key 'lucky.detectors.{name}': the detector sweep names one of its detectors "
+                              f"'{name}' too ({spec['read_noise_e']:g} e-, {spec['photons_per_frame']:g} photons per "
+                              "frame); a case given the sweep would get that one under this name: rename it")
+
+
+def _check_label(label, where: str) -> None:
+    """A label drawn by matplotlib: its math text (between ``$``) must parse, as the figure
+    job would parse it (matplotlib loaded only for a label holding ``$``)."""
+    if "$" not in label:
+        return
+    from matplotlib import cbook
+    from matplotlib.mathtext import MathTextParser
+
+    if not cbook.is_math_text(label):
+        return
+    try:
+        MathTextParser("path").parse(label, 72)
+    except ValueError as err:
+        reason = [line.strip() for line in str(err).splitlines() if line.strip()][-1]
+        raise ConfigError(f"config key '{where}': matplotlib cannot draw {label!r} ({reason}); write the text "
+                          r"between $ as matplotlib math text, or a literal $ as \$") from None
+
+
 def _check_figure(fig_id: str, figure: dict, cases: dict, config: dict) -> None:
     for case in figure["cases"]:
         if case not in config["cases"]:
@@ -117,7 +167,12 @@ def _check_figure(fig_id: str, figure: dict, cases: dict, config: dict) -> None:
     if figure["kind"] == "comparisons":
         if "pairs" not in figure:
             raise ConfigError(f"config key 'figures.{fig_id}.pairs': required for comparisons")
+        labels = [pair["label"] for pair in figure["pairs"]]
         for i, pair in enumerate(figure["pairs"]):
+            _check_label(pair["label"], f"figures.{fig_id}.pairs[{i}].label")
+            if labels.index(pair["label"]) != i:
+                raise ConfigError(f"config key 'figures.{fig_id}.pairs[{i}].label': {pair['label']!r} is also the "
+                                  f"label of pairs[{labels.index(pair['label'])}] (a label names one difference)")
             for side in ("a", "b"):
                 case, criterion = pair[side]["case"], pair[side]["criterion"]
                 if case not in figure["cases"]:
@@ -200,18 +255,18 @@ def unused_cases(config: dict) -> list[str]:
     return [name for name in config["cases"] if name not in shown]
 
 
-def load_study(*paths) -> tuple[dict, dict]:
-    """Read study YAML files, each deep-merged over the one before (as Snakemake's
-    ``configfile:`` and ``--configfile`` do), and validate the result; returns
-    (config as written, resolved cases: the sweeps' among them)."""
+def read_study(*paths) -> dict:
+    """Study YAML files, each read strictly (``yamlfile``: no alias bombs, duplicate keys or
+    top level other than a mapping) and deep-merged over the one before (as Snakemake's
+    ``configfile:`` and ``--configfile`` do): the config as written, not yet validated."""
     config = {}
     for path in paths:
-        try:
-            with open(path) as f:
-                layer = yaml.safe_load(f) or {}
-        except FileNotFoundError as err:
-            raise ConfigError(f"config file '{path}' not found") from err
-        except yaml.YAMLError as err:
-            raise ConfigError(f"config file '{path}' is not valid YAML: {err}") from err
-        config = deep_merge(config, layer)
+        config = deep_merge(config, read_config_file(path))
+    return config
+
+
+def load_study(*paths) -> tuple[dict, dict]:
+    """:func:`read_study`, validated; returns (config as written, resolved cases: the
+    sweeps' among them)."""
+    config = read_study(*paths)
     return config, validate_study(config)

@@ -20,13 +20,14 @@ new ones run. A figure with ``sweep: r0`` draws every point of the grid.
 
 import copy
 import itertools
-import re
+import math
 from dataclasses import dataclass
 
-from .schema import ConfigError, deep_merge
+from .schema import ConfigError, deep_merge, name_problem
 
-CASE_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.+-]*$")
-"""A case name that is safe as a file name and in a shell word (no ``..``)."""
+MAX_GRID_POINTS = 1000
+"""Most grid points of all of a study's sweeps together: each is a case, with its simulation
+and post-processing jobs (the paper's sweeps hold 11)."""
 
 
 @dataclass(frozen=True)
@@ -86,18 +87,34 @@ def sweep_points(config: dict, sweep: str) -> list[SweepPoint]:
     existing = {}
     for name, override in config.get("cases", {}).items():
         existing.setdefault(repr(deep_merge(config["base"], override)), name)
-    points = []
+    points, named = [], {}
     for values in itertools.product(*(parameters[p] for p in paths)):
         override = copy.deepcopy(spec.get("overrides", {}))
         for path, value in zip(paths, values):
             override = deep_merge(override, _nested(path, value))
         name = "_".join([sweep] + [f"{labels[p]}-{_value_text(v)}" for p, v in zip(paths, values)])
-        if not CASE_NAME.match(name) or ".." in name:
-            raise ConfigError(f"config key 'sweeps.{sweep}.parameters': the case name '{name}' has characters "
-                              "a case name cannot hold (letters, digits, _ . + - only)")
+        if (problem := name_problem(name)) is not None:
+            raise ConfigError(f"config key 'sweeps.{sweep}.parameters': the grid point {_point_text(paths, values)} "
+                              f"would be a case named by its values, but {problem}")
+        if name in named:
+            path = next((p for p, a, b in zip(paths, named[name], values) if repr(a) != repr(b)), paths[0])
+            raise ConfigError(f"config key 'sweeps.{sweep}.parameters.{path}': the values "
+                              f"{named[name][paths.index(path)]!r} and {values[paths.index(path)]!r} would share the "
+                              f"case name '{name}' (names keep 6 significant digits); make them differ there or "
+                              "sweep one of them")
+        named[name] = values
         name = existing.get(repr(deep_merge(config["base"], override)), name)
         points.append(SweepPoint(name, dict(zip(paths, values))))
     return points
+
+
+def _point_text(paths, values) -> str:
+    return "(" + ", ".join(f"{p}: {v!r}" for p, v in zip(paths, values)) + ")"
+
+
+def grid_size(spec: dict) -> int:
+    """Points of a sweep's grid (its ``parameters``' values multiplied), counted, not listed."""
+    return math.prod(len(values) for values in spec["parameters"].values())
 
 
 def sweep_overrides(config: dict, sweep: str) -> dict:
@@ -123,6 +140,14 @@ def expand_sweeps(config: dict) -> dict:
     from .schema import load_schema, validate_block  # the sweeps block is checked before it is used
 
     validate_block(config, "sweeps", load_schema())
+    sizes = {sweep: grid_size(spec) for sweep, spec in sweeps.items()}
+    if sum(sizes.values()) > MAX_GRID_POINTS:
+        largest = max(sizes, key=sizes.get)
+        shape = " x ".join(str(len(v)) for v in sweeps[largest]["parameters"].values())
+        others = f"; {sum(sizes.values()):,} with the other sweeps" if len(sizes) > 1 else ""
+        raise ConfigError(f"config key 'sweeps.{largest}.parameters': a grid of {sizes[largest]:,} points ({shape} "
+                          f"values{others}), more than the {MAX_GRID_POINTS:,} a study may hold: each point is a "
+                          "case, with its own simulation and post-processing jobs")
     expanded = copy.deepcopy(config)
     for sweep in sweeps:
         for name, override in sweep_overrides(config, sweep).items():

@@ -1,0 +1,352 @@
+"""The last ways in (issue 40): every config that cannot run to the end is refused before any
+job, naming the key or the file, by `luckyao check` and the workflow alike: names whole and
+short enough for a file name, detector and sweep names that cannot collide, seeds, labels
+matplotlib can draw, strict YAML (no alias bombs, duplicate keys or a top level that is not
+a mapping), bounded grids, and one pre-flight of memory and of the disk the study's files
+need together."""
+
+import json
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+import xarray as xr
+import yaml
+
+from luckyao.cli import main
+from luckyao.jobs import resources
+from luckyao.jobs.resources import preflight, study_jobs
+from luckyao.studyspec.lucky import sweep_detectors
+from luckyao.studyspec.schema import ConfigError
+from luckyao.studyspec.study import validate_study
+from luckyao.studyspec.sweeps import expand_sweeps
+
+REPO = Path(__file__).resolve().parents[1]
+TINY = REPO / "tests" / "data" / "tiny.yaml"
+
+LIST_BOMB = "a0: &a0 [1, 2]\n" + "".join(f"a{i}: &a{i} [*a{i - 1}, *a{i - 1}]\n" for i in range(1, 30))
+MAPPING_BOMB = "d0: &d0 {x: 1}\n" + "".join(f"d{i}: &d{i} {{p: *d{i - 1}, q: *d{i - 1}}}\n" for i in range(1, 30))
+
+
+def tiny() -> dict:
+    return yaml.safe_load(TINY.read_text())
+
+
+def check(capsys, *paths) -> tuple[int, str]:
+    code = main(["check", *map(str, paths)])
+    captured = capsys.readouterr()
+    return code, captured.out + captured.err
+
+
+def with_sweep(parameters: dict) -> dict:
+    study = tiny()
+    study["sweeps"]["grid"] = {"parameters": parameters}
+    study["figures"]["grid"] = {"kind": "quality_vs_parameter", "sweep": "grid", "criteria": ["strehl"],
+                                "fractions": [1.0]}
+    return study
+
+
+# --- detector names (item 3) ---------------------------------------------------------------
+
+def test_a_detector_named_like_a_sweep_detector_is_refused_by_key():
+    """The tiny study's sweep names rn0.1_100ph: a listed detector of that name would be
+    replaced by the sweep's in the cases that get the sweep, a figure comparing two detectors
+    under one name."""
+    study = tiny()
+    assert "rn0.1_100ph" in sweep_detectors(study["lucky"])
+    study["lucky"]["detectors"]["rn0.1_100ph"] = {"photons_per_frame": 50, "read_noise_e": 3.0}
+    with pytest.raises(ConfigError, match=r"config key 'lucky\.detectors\.rn0\.1_100ph': the detector sweep names"):
+        validate_study(study)
+
+
+def test_sweep_detectors_that_would_share_a_name_are_refused_by_key():
+    study = tiny()
+    study["lucky"]["detector_sweep"]["photons_per_frame"] = {"min": 100, "max": 100.1, "levels": 3}  # all 100ph
+    with pytest.raises(ConfigError, match=r"config key 'lucky\.detector_sweep\.photons_per_frame': .*share the name "
+                                          r"'rn0\.1_100ph'"):
+        validate_study(study)
+    study = tiny()
+    study["lucky"]["detector_sweep"]["read_noise_e"] = [0.1, 0.1000001]  # rn0.1 both
+    with pytest.raises(ConfigError, match=r"config key 'lucky\.detector_sweep\.read_noise_e'"):
+        validate_study(study)
+
+
+def test_a_detector_sweep_is_bounded():
+    study = tiny()
+    study["lucky"]["detector_sweep"]["photons_per_frame"]["levels"] = 10**8
+    start = time.perf_counter()
+    with pytest.raises(ConfigError, match=r"config key 'lucky\.detector_sweep': .*100,000,000 detectors"):
+        validate_study(study)
+    assert time.perf_counter() - start < 5
+
+
+# --- names (items 8, 10) -------------------------------------------------------------------
+
+@pytest.mark.parametrize("name", ["good\n", "x\n", "caf\u00e9", "g\u00f6\u00f6d", "tab\t", "a" * 129, "a" * 300])
+@pytest.mark.parametrize("kind", ["case", "figure", "detector"])
+def test_a_name_is_matched_whole_short_and_ascii(kind, name):
+    """'good\\n' passed `$` (it matches before a final newline) and made folders with a newline
+    in their names; 300 characters failed mid-run (a file name holds 255 bytes)."""
+    study = tiny()
+    if kind == "case":
+        study["cases"][name] = {}
+        key = "cases"
+    elif kind == "figure":
+        study["figures"][name] = study["figures"]["longexp"]
+        key = "figures"
+    else:
+        study["lucky"]["detectors"][name] = {"photons_per_frame": None, "read_noise_e": 0.0}
+        key = "lucky.detectors"
+    with pytest.raises(ConfigError, match=rf"config key '{key}': .*(is not a safe name|characters long, more than "
+                                          r"the 128)"):
+        validate_study(study)
+
+
+def test_the_longest_name_allowed_runs_its_file_names():
+    study = tiny()
+    study["cases"]["a" * 128] = {}
+    validate_study(study)
+
+
+@pytest.mark.parametrize("where", ["sweep", "parameter"])
+def test_sweep_and_parameter_names_are_matched_whole(where):
+    study = with_sweep({"atmosphere.r0_500nm_m": [0.3]})
+    if where == "sweep":
+        study["sweeps"]["grid\n"] = study["sweeps"].pop("grid")
+        study["figures"]["grid"]["sweep"] = "grid\n"
+    else:
+        study["sweeps"]["grid"]["parameters"] = {"atmosphere.r0_500nm_m\n": [0.3]}
+    with pytest.raises(ConfigError, match=r"config key 'sweeps"):
+        validate_study(study)
+
+
+def test_a_sweep_point_named_longer_than_a_file_name_allows_is_refused_by_key():
+    study = with_sweep({"lgs.profile": ["range_gate" + "x" * 130]})
+    with pytest.raises(ConfigError, match=r"config key 'sweeps\.grid\.parameters': the grid point .* characters long"):
+        validate_study(study)
+
+
+# --- near-equal sweep values (item 11) ----------------------------------------------------------
+
+def test_sweep_values_that_would_share_a_name_are_refused_by_key():
+    """Names keep 6 significant digits: 0.121 and 0.1210001 were one case, drawn at two x."""
+    study = with_sweep({"atmosphere.r0_500nm_m": [0.121, 0.1210001, 0.3]})
+    with pytest.raises(ConfigError, match=r"config key 'sweeps\.grid\.parameters\.atmosphere\.r0_500nm_m': the values "
+                                          r"0\.121 and 0\.1210001 would share the case name 'grid_r0_500nm_m-0\.121'"):
+        validate_study(study)
+    validate_study(with_sweep({"atmosphere.r0_500nm_m": [0.121, 0.1211, 0.3]}))  # six digits apart: two cases
+
+
+# --- seeds, labels (item 10) -----------------------------------------------------------------
+
+def test_a_seed_outside_0_to_2_63_is_refused_by_key():
+    study = tiny()
+    study["seed"] = 2**63 - 1
+    validate_study(study)
+    for seed in (2**63, 2**64 + 5, -1):
+        study["seed"] = seed
+        with pytest.raises(ConfigError, match=r"config key 'seed'"):
+            validate_study(study)
+
+
+@pytest.mark.parametrize("label, drawable", [
+    (r"turned asterism", True), (r"$\alpha$ - $r_0$ (50%)", True), (r"costs $5", True),
+    (r"$\undefinedmacro$ - b", False), (r"a $x^$ b", False)])
+def test_a_label_matplotlib_cannot_draw_is_refused_by_key(label, drawable):
+    """A label with an undefined macro killed the figure job after every simulation."""
+    study = tiny()
+    study["figures"]["paired"]["pairs"][0]["label"] = label
+    if drawable:
+        validate_study(study)
+    else:
+        with pytest.raises(ConfigError, match=r"config key 'figures\.paired\.pairs\[0\]\.label': matplotlib cannot "
+                                              r"draw"):
+            validate_study(study)
+
+
+def test_two_pairs_of_one_label_are_refused_by_key():
+    study = tiny()
+    pairs = study["figures"]["paired"]["pairs"]
+    pairs.append(dict(pairs[0], a=pairs[0]["b"], b=pairs[0]["a"]))
+    with pytest.raises(ConfigError, match=r"config key 'figures\.paired\.pairs\[1\]\.label'"):
+        validate_study(study)
+
+
+# --- strict YAML, bounded grids (items 9, 10) ------------------------------------------------
+
+@pytest.mark.parametrize("overlay, message", [
+    ("seed: 1\nseed: 2\n", r"key 'seed' is written twice in one mapping \(lines 1 and 2\)"),
+    ("lucky:\n  fractions: [0.1]\n  fractions: [0.5]\n", r"key 'fractions' is written twice .*lines 2 and 3"),
+    ("- seed\n- 1\n", r"its top level is a list, not a mapping"),
+    ("7\n", r"its top level is a int, not a mapping"),
+    ("x: &x [*x]\n", r"a YAML alias refers to a value that holds it"),
+    (LIST_BOMB, r"holds more than 100,000 values once its YAML aliases"),
+    (MAPPING_BOMB, r"holds more than 100,000 values once its YAML aliases"),
+], ids=["duplicate", "nested-duplicate", "list", "number", "recursive-alias", "list-bomb", "mapping-bomb"])
+def test_check_refuses_a_config_file_naming_it(overlay, message, tmp_path, capsys):
+    path = tmp_path / "overlay.yaml"
+    path.write_text(overlay)
+    start = time.perf_counter()
+    code, output = check(capsys, TINY, path)
+    assert code == 1 and f"config file '{path}'" in output, output
+    assert len(output.strip().splitlines()) == 1 and __import__("re").search(message, output), output
+    assert time.perf_counter() - start < 10
+
+
+def test_yaml_merge_keys_and_the_studies_still_read():
+    from luckyao.studyspec.yamlfile import read_config_text
+
+    assert read_config_text("b: &b {x: 1, y: 2}\nc: {<<: *b, x: 3}\n", "t") == {"b": {"x": 1, "y": 2},
+                                                                              "c": {"x": 3, "y": 2}}
+    for path in [TINY, *sorted((REPO / "config").glob("*.yaml"))]:
+        assert read_config_text(path.read_text(), str(path)) == yaml.safe_load(path.read_text())
+
+
+def test_a_grid_too_large_is_refused_at_once_by_key():
+    """A grid of 10^6 points hung `check` for more than 10 minutes; 10^4 planned 40,202 jobs."""
+    values = [0.1 + 0.001 * i for i in range(100)]
+    for parameters, points in (({"atmosphere.r0_500nm_m": values, "atmosphere.outer_scale_m": values[:20]}, "2,000"),
+                               ({"atmosphere.r0_500nm_m": values, "atmosphere.outer_scale_m": values,
+                                 "camera.wavelength_m": values}, "1,000,000")):
+        start = time.perf_counter()
+        with pytest.raises(ConfigError, match=rf"config key 'sweeps\.grid\.parameters': a grid of {points} points "
+                                              r"\(100 x .* values.*\), more than the 1,000 a study may hold"):
+            validate_study(with_sweep(parameters))
+        assert time.perf_counter() - start < 5
+
+
+@pytest.mark.workflow
+@pytest.mark.parametrize("bomb", [LIST_BOMB, MAPPING_BOMB], ids=["list-bomb", "mapping-bomb"])
+def test_the_workflow_refuses_an_alias_bomb_before_reading_it(bomb, tmp_path):
+    """A 2 KB alias bomb hung the dry run (Snakemake's own config merge, or the checks)."""
+    folder = tmp_path / "study"
+    (folder / "config").mkdir(parents=True)
+    (folder / "config" / "config.yaml").write_text(TINY.read_text() + "junk:\n"
+                                                   + "".join(f"  {line}\n" for line in bomb.splitlines()))
+    command = [sys.executable, "-m", "snakemake", "-s", str(REPO / "Snakefile"), "-d", str(folder), "-n",
+               "--cores", "1"]
+    result = subprocess.run(command, capture_output=True, text=True, timeout=120)
+    assert result.returncode != 0
+    assert "luckyao: invalid study config: config file 'config/config.yaml': holds more than 100,000 values" \
+        in result.stderr, result.stderr[-2000:]
+
+
+@pytest.mark.workflow
+def test_run_sh_refuses_an_overlay_alias_bomb_before_snakemake_merges_it(tmp_path):
+    """Snakemake merges --configfile overlays itself, walking every path of a mapping bomb:
+    `bash run.sh study` (luckyao.jobs.live_run) reads them strictly first."""
+    folder = tmp_path / "study"
+    (folder / "config").mkdir(parents=True)
+    (folder / "config" / "config.yaml").write_text(TINY.read_text())
+    overlay = tmp_path / "bomb.yaml"
+    overlay.write_text("junk:\n" + "".join(f"  {line}\n" for line in MAPPING_BOMB.splitlines()))
+    command = [sys.executable, "-m", "luckyao.jobs.live_run", "-s", str(REPO / "Snakefile"), "-d", str(folder),
+               "-n", "--cores", "1", "--configfile", str(overlay)]
+    result = subprocess.run(command, capture_output=True, text=True, timeout=120)
+    assert result.returncode != 0
+    assert f"config file '{overlay}': holds more than 100,000 values" in result.stderr, result.stderr[-2000:]
+
+
+# --- one pre-flight, sizes (item 9) ---------------------------------------------------------------
+
+def huge(tmp_path) -> Path:
+    """duration_s 1e7: about 3 TB of memory for each simulation, the issue's 12,870 GB case."""
+    path = tmp_path / "huge.yaml"
+    path.write_text("turbulence: {duration_s: 1.0e+7}\nbase: {duration_s: 1.0e+7}\n")
+    return path
+
+
+def test_check_refuses_a_study_too_large_for_this_machine(tmp_path, capsys):
+    """`luckyao check` called it valid while the dry run refused it: one pre-flight now."""
+    code, output = check(capsys, TINY, huge(tmp_path))
+    assert code == 1 and "valid, " not in output, output
+    assert "study too large: config key 'turbulence': job turbulence screens_" in output, output
+    assert "study too large: config key 'cases.ltao': job simulate ltao needs about 3,2" in output, output
+    code, output = check(capsys, TINY)
+    assert code == 0 and "valid, 8 cases" in output
+
+
+@pytest.mark.workflow
+def test_the_dry_run_refuses_what_check_refuses(tmp_path):
+    folder = tmp_path / "study"
+    (folder / "config").mkdir(parents=True)
+    (folder / "config" / "config.yaml").write_text(TINY.read_text())
+    command = [sys.executable, "-m", "snakemake", "-s", str(REPO / "Snakefile"), "-d", str(folder), "-n",
+               "--cores", "1", "--configfile", str(huge(tmp_path))]
+    result = subprocess.run(command, capture_output=True, text=True, timeout=300)
+    assert result.returncode != 0
+    assert "luckyao: study too large: config key 'cases.ltao': job simulate ltao needs" in result.stderr, \
+        result.stderr[-2000:]
+
+
+def free_disk(monkeypatch, free_bytes: float) -> None:
+    monkeypatch.setattr(resources.shutil, "disk_usage", lambda folder: type("U", (), {"free": free_bytes})())
+
+
+def test_the_files_of_a_study_are_summed_against_the_free_disk(tmp_path, monkeypatch):
+    """With keep_frames every frame cube stays: the sum must fit, not each file alone (the
+    paper run with keep_frames, ~130 GB, was accepted with 40 GB free)."""
+    study = expand_sweeps(dict(tiny(), keep_frames=True))
+    cases = validate_study(study)
+    sizes = [size for _, _, _, output, size in study_jobs(study, cases) if output is not None]
+    free_disk(monkeypatch, max(sizes) * 1.01)
+    assert sum(sizes) > max(sizes) * 1.01
+    problems = preflight(study, cases, tmp_path, memory_bytes=1e15)
+    assert len(problems) == 1 and problems[0].startswith("config key 'keep_frames': the study's files not yet made "
+                                                         "need about"), problems
+    assert "every frame cube kept" in problems[0]
+    free_disk(monkeypatch, sum(sizes) * 1.01)
+    assert preflight(study, cases, tmp_path, memory_bytes=1e15) == []
+
+
+def test_frame_cubes_deleted_once_post_processed_count_as_many_as_run_at_once(tmp_path, monkeypatch):
+    study = expand_sweeps(tiny())
+    cases = validate_study(study)
+    jobs = [(job, size) for job, _, _, output, size in study_jobs(study, cases) if output is not None]
+    lasting = sum(size for job, size in jobs if not job.startswith("simulate "))
+    frames = sorted((size for job, size in jobs if job.startswith("simulate ")), reverse=True)
+    free_disk(monkeypatch, lasting + frames[0] + frames[1] / 2)
+    assert preflight(study, cases, tmp_path, memory_bytes=1e15, parallel_jobs=1) == []
+    problems = preflight(study, cases, tmp_path, memory_bytes=1e15, parallel_jobs=2)
+    assert len(problems) == 1 and "the 2 largest frame cubes at once" in problems[0]
+
+
+def test_a_file_already_made_needs_no_disk(tmp_path, monkeypatch):
+    study = expand_sweeps(dict(tiny(), keep_frames=True))
+    cases = validate_study(study)
+    for _, _, _, output, _ in study_jobs(study, cases):
+        if output is not None:
+            (tmp_path / output).parent.mkdir(parents=True, exist_ok=True)
+            (tmp_path / output).touch()
+    free_disk(monkeypatch, 0.0)
+    assert preflight(study, cases, tmp_path, memory_bytes=1e15) == []
+
+
+# --- draw and export say what they expected (item 10) ---------------------------------------------
+
+def titled(path: Path, title: str, **variables) -> Path:
+    xr.Dataset({name: ("x", np.asarray(values, dtype=float)) for name, values in variables.items()},
+               attrs={"title": title, "config_json": json.dumps({"duration_s": 1.0})}).to_netcdf(path)
+    return path
+
+
+def test_draw_says_it_expected_a_figures_data():
+    import luckyao
+
+    case = xr.Dataset({"strehl": ("x", [0.1])}, attrs={"title": "luckyao lucky imaging of case good",
+                                                        "config_json": json.dumps({"duration_s": 1.0})})
+    with pytest.raises(ValueError, match=r"luckyao\.draw: expected a figure's data \(figures/<id>\.nc\), got a "
+                                         r"case's lucky-imaging results"):
+        luckyao.draw(case)
+
+
+def test_export_says_it_expected_a_cases_lucky_results(tmp_path, capsys):
+    path = titled(tmp_path / "telemetry.nc", "luckyao telemetry of case good", frame_strehl=[0.1, 0.2])
+    code = main(["export", str(path), "--out", str(tmp_path / "x.fits")])
+    output = capsys.readouterr().err
+    assert code == 1 and "expected a case's lucky-imaging results (results/cases/<case>/lucky.nc), got a case's " \
+                         "telemetry" in output, output
+    assert "n_pixels" not in output and not (tmp_path / "x.fits").exists()
