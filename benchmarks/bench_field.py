@@ -18,10 +18,10 @@ Run: .venv/bin/python benchmarks/bench_field.py [config.yaml]
 """
 
 import dataclasses
-import os
 
-for _name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS"):
-    os.environ[_name] = "1"
+from luckyao.threads import pin_one_thread  # no numpy: before it is imported
+
+pin_one_thread()
 
 import sys  # noqa: E402
 import tempfile  # noqa: E402

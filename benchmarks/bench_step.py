@@ -24,10 +24,10 @@ power law a D^b with its value at 39 m, and the study's own file-size estimates 
 import argparse
 import dataclasses
 import json
-import os
 
-for _name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS"):
-    os.environ[_name] = "1"
+from luckyao.threads import pin_one_thread  # no numpy: before it is imported
+
+pin_one_thread()
 
 import resource  # noqa: E402
 import subprocess  # noqa: E402

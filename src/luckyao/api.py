@@ -25,6 +25,7 @@ from pathlib import Path
 import xarray as xr
 
 from .study.config import SIGNAL_KINDS, ConfigError, load_study as _load_study, validate_study
+from .threads import ONE_THREAD
 
 __all__ = ["open_case", "open_telemetry", "open_figure", "draw", "load_study", "run_case", "export_fits"]
 
@@ -78,15 +79,10 @@ def export_fits(lucky_path, out_path, detectors=None) -> int:
     return export(lucky_path, out_path, detectors)
 
 
-ONE_THREAD = {name: "1" for name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS",
-                                      "NUMBA_NUM_THREADS")}
-"""The numerical libraries pinned to one thread, as the workflow runs every step
-(``workflow/rules/common.smk``): the same rounding, so the same numbers."""
-
-
 def _step(*argv: str) -> None:
     """One workflow step, run as the workflow runs it: ``python -m luckyao <step> ...``
-    with the libraries on one thread; a failure raises with the step's own message."""
+    with the libraries on one thread (:mod:`luckyao.threads`, as the workflow runs every step: the
+    same rounding, so the same numbers); a failure raises with the step's own message."""
     done = subprocess.run([sys.executable, "-m", "luckyao", *argv], env={**os.environ, **ONE_THREAD},
                           capture_output=True, text=True)
     if done.returncode:

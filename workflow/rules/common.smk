@@ -16,6 +16,7 @@ from luckyao.study.config import (ConfigError, calibration_key, calibration_spec
                                   sweep_detectors,
                                   turbulence_key, turbulence_spec, unused_cases, validate_study)
 from luckyao.study.sweeps import expand_sweeps, sweep_points
+from luckyao.threads import shell_prefix
 
 RUN_LOCK = hold_shared()  # this study folder is in use until this Snakemake exits (run.sh cleans up only when free)
 
@@ -55,8 +56,8 @@ calibration and memory estimate serve the product: they share its LGS chain)."""
 for _name, _spec in SLOPES.items():
     if _spec is not None:
         SLOPES_CASES.setdefault(slopes_key(_spec), []).append(_name)
-LUCKYAO = ("OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1 NUMBA_NUM_THREADS=1 "
-           f"{shlex.quote(sys.executable)} -m luckyao")  # every value formatted into a command is quoted (:q)
+# every job on one thread (src/luckyao/threads.py); every value formatted into a command is quoted (:q)
+LUCKYAO = f"{shell_prefix()}{shlex.quote(sys.executable)} -m luckyao"
 
 
 def reconstructor_file(case):
