@@ -4,7 +4,7 @@ from pathlib import Path
 
 import numpy as np
 
-from luckyao.lucky import kernels
+from luckyao.lucky import noise_streams
 from luckyao.seeds import detector_key, screen_rng, target_seed, wfs_noise_rng
 from luckyao.study.config import load_study, lucky_settings
 
@@ -35,7 +35,7 @@ def test_no_two_detector_streams_coincide_in_the_default_study():
     name = next(f["cases"][0] for f in study["figures"].values() if f["kind"] == "quality_vs_signal")
     detectors = lucky_settings(study, cases, name)["detectors"]
     assert len(detectors) > 1
-    keys = {kernels.stream_key(target_seed(study["seed"], t), detector_key(d), f)
+    keys = {noise_streams.stream_key(target_seed(study["seed"], t), detector_key(d), f)
             for t in range(3) for d in detectors for f in range(50)}
     assert len(keys) == 3 * len(detectors) * 50
 
