@@ -3,9 +3,10 @@
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from luckyao.lucky import noise_streams
-from luckyao.seeds import detector_key, screen_rng, target_seed, wfs_noise_rng
+from luckyao.seeds import CALIBRATION_STREAM, calibration_rng, detector_key, screen_rng, target_seed, wfs_noise_rng
 from luckyao.study.config import load_study, lucky_settings
 
 
@@ -17,9 +18,17 @@ def test_no_two_numpy_streams_coincide():
     """The WFS noise is not a screen layer's stream (it was layer 1's: ``[seed, 1]``), for any
     layer index the screens could use, and the layers differ from one another."""
     for seed in (0, 1, 2014):
-        draws = [_first_draws(screen_rng(seed, layer)) for layer in range(64)] + [_first_draws(wfs_noise_rng(seed))]
+        draws = [_first_draws(screen_rng(seed, layer)) for layer in range(64)] + [
+            _first_draws(wfs_noise_rng(seed)), _first_draws(calibration_rng(seed))]
         assert len(set(draws)) == len(draws)
         assert _first_draws(wfs_noise_rng(seed)) != _first_draws(np.random.default_rng([seed, 1]))
+    with pytest.raises(ValueError):
+        screen_rng(0, CALIBRATION_STREAM)  # no layer replays the calibration's stream
+
+
+def test_the_calibration_draws_are_unchanged():
+    """The WFS calibration still draws from ``default_rng([seed, 1000])`` (the calibrations of earlier runs)."""
+    assert _first_draws(calibration_rng(2014)) == _first_draws(np.random.default_rng([2014, 1000]))
 
 
 def test_todays_screens_are_unchanged():
