@@ -85,19 +85,20 @@ def stages(case: Case, screens, reconstructors, commands, calibration) -> dict:
         imager.intensity(propagator.sample_valid([step], case.layer_scales([step]))[0] * to_camera)
     sensor, estimator = lgs_chain(case, screens, reconstructors, 1, calibration)
     surface = case.ao.deformable_mirror(case.telescope).grid_surface(imager.grid, imager.mask)
-    correction = OpenLoopCorrection(*commands, surface, sensor.exposure_steps, case.ao.delay_steps,
-                                        case.steps_per_frame)
-    e, spf = sensor.exposure_steps, case.steps_per_frame
+    clock = case.clock
+    correction = OpenLoopCorrection(*commands, surface, clock.exposure_steps, case.ao.delay_steps,
+                                        clock.steps_per_frame)
+    e, spf = clock.exposure_steps, clock.steps_per_frame
     estimator.rms_nm(sensor.exposure_slopes(np.arange(e), case.layer_scales(np.arange(e))))
     names = ["LGS propagation", "WFS", "reconstruction", "DM commands + residual", "science propagation",
              "DM surface", "science image", "truth rms", "frame"]
     spent = dict.fromkeys(names, 0.0)
     intensity = np.zeros((len(case.targets), imager.fft_size, imager.fft_size), dtype=np.float32)
     for frame in range(N_STEPS // spf):
-        steps = frame * spf + np.arange(spf)
+        steps = clock.steps(frame)
         layer_scales = case.layer_scales(steps)
         slopes = []
-        for i in range(0, spf, e):
+        for i in clock.exposure_offsets():
             t0 = time.perf_counter()
             sensor.sample(steps[i:i + e], layer_scales[i:i + e])
             t1 = time.perf_counter()
@@ -108,9 +109,10 @@ def stages(case: Case, screens, reconstructors, commands, calibration) -> dict:
         slopes = np.stack(slopes)
         estimator.rms_nm(slopes)
         t1 = time.perf_counter()
-        for start, exposure in zip(steps[::e], slopes):
+        starts = clock.exposure_starts(steps)
+        for start, exposure in zip(starts, slopes):
             correction.measure(int(start), exposure)
-        estimator.rms_nm(np.stack([correction.residual_slopes(int(s), x) for s, x in zip(steps[::e], slopes)]))
+        estimator.rms_nm(np.stack([correction.residual_slopes(int(s), x) for s, x in zip(starts, slopes)]))
         t2 = time.perf_counter()
         phases = propagator.sample_valid(steps, layer_scales)
         t3 = time.perf_counter()

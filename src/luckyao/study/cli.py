@@ -97,7 +97,7 @@ def cmd_simulate(args) -> None:
         telemetry = simulate(case, screens, writer.write, sensor, estimator, commands, imaged,
                              lgs_rms_nm=lgs_rms_nm)
     elapsed = time.perf_counter() - start
-    steps = case.n_frames * case.steps_per_frame
+    steps = case.clock.n_steps
     logging.getLogger(__name__).info("simulated %d steps in %.1f s: %.3f ms per step (with I/O)",
                                      steps, elapsed, 1e3 * elapsed / steps)
     telemetry.attrs.update(provenance(f"luckyao telemetry of case {args.name}", config, args.seed))

@@ -17,6 +17,8 @@ import jsonschema
 import numpy as np
 import yaml
 
+from ..clock import frame_count
+
 SCHEMA_PATH = Path(__file__).with_name("config.schema.yaml")
 
 
@@ -280,11 +282,6 @@ def unused_cases(config: dict) -> list[str]:
     """Cases that no figure lists (``all`` does not run them; ``all_cases`` does)."""
     shown = {case for figure in config["figures"].values() for case in figure["cases"]}
     return [name for name in config["cases"] if name not in shown]
-
-
-def frame_count(case: dict) -> int:
-    """Whole lucky frames in a resolved case's duration."""
-    return int(np.floor(case["duration_s"] / case["camera"]["frame_time_s"] + 1e-9))
 
 
 def imaged_targets(case: dict) -> list[int]:

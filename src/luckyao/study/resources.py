@@ -32,8 +32,9 @@ import os
 import shutil
 from pathlib import Path
 
+from ..clock import FrameClock, frame_count
 from .turbulence import TurbulenceSpec, strip_specs
-from .config import (commands_key, commands_spec, frame_count, imaged_targets, lucky_settings, reconstructor_key,
+from .config import (commands_key, commands_spec, imaged_targets, lucky_settings, reconstructor_key,
                      reconstructor_spec, registrations, slopes_key, slopes_spec, turbulence_key, turbulence_spec)
 
 BASE_BYTES = 0.4e9
@@ -101,8 +102,7 @@ def commands_memory_bytes(spec: dict) -> float:
 def slopes_bytes(case: dict) -> float:
     """An AO case's LGS slopes product (float32, every WFS exposure's slopes)."""
     n_slopes, _ = _slopes_and_points(case)
-    steps_per_frame = round(case["camera"]["frame_time_s"] / case["time_step_s"])
-    return 4.0 * n_slopes * frame_count(case) * steps_per_frame / case["wfs"]["exposure_steps"]
+    return 4.0 * n_slopes * FrameClock.from_config(case).n_exposures
 
 
 def slopes_memory_bytes(case: dict) -> float:

@@ -35,7 +35,8 @@ import yaml
 
 from .archive import (CASE_FILES, CHECKSUMS, FORMAT, REPO, REQUIRED, ArchiveError, case_jobs, package_differences,
                       parse_lock, runtime_packages)
-from .config import frame_count, validate_study
+from ..clock import FrameClock
+from .config import validate_study
 from .datasets import code_version
 
 CHUNK_BYTES = 1 << 20
@@ -143,7 +144,7 @@ def cheapest_case(names, held: dict[str, bytes], study: dict, cases: dict) -> tu
 
     def work(c):
         config = cases[c]
-        return (frame_count(config) * round(config["camera"]["frame_time_s"] / config["time_step_s"]),
+        return (FrameClock.from_config(config).n_steps,
                 len(config["targets_arcsec"]), config["lgs"]["enabled"], config["ao"]["mode"] != "none",
                 config["wfs"]["n_subapertures"], config["camera"]["n_pixels"], c)
     return min(archived, key=work), None
