@@ -35,7 +35,7 @@ from bench_step import products  # noqa: E402
 
 from luckyao.study.case import Case  # noqa: E402
 from luckyao.study.config import imaged_targets, load_study, turbulence_spec  # noqa: E402
-from luckyao.study.simulation import Replay, lgs_chain, simulate  # noqa: E402
+from luckyao.study.simulation import Replay, run_time_loop  # noqa: E402
 from luckyao.study.turbulence import read_screens, write_screens  # noqa: E402
 
 N_STEPS = 600
@@ -45,9 +45,10 @@ REPLAY_PASSES = 1  # run_lucky reads a target selected and recentred by the star
 
 
 def loop_seconds(case: Case, screens, reconstructors, commands, calibration, imaged=None):
-    sensor, estimator = lgs_chain(case, screens, reconstructors, 1, calibration)
+    """Seconds of the case's time loop (``run_time_loop``, its set-up included) and its telemetry."""
     start = time.perf_counter()
-    telemetry = simulate(case, screens, lambda start, block: None, sensor, estimator, commands, imaged)
+    telemetry = run_time_loop(case, screens, lambda start, block: None, 1, reconstructors=reconstructors,
+                              calibration=calibration, commands=commands, imaged_targets=imaged)
     return time.perf_counter() - start, telemetry
 
 
@@ -62,7 +63,7 @@ def per_step_ms(timed, case: Case) -> float:
     """ms per step of ``timed(case)`` (seconds) over the steps between a 4-frame run and the
     whole run, so that set-up drops out."""
     short = timed(dataclasses.replace(case, n_frames=4))
-    return 1e3 * (timed(case) - short) / ((case.n_frames - 4) * case.steps_per_frame)
+    return 1e3 * (timed(case) - short) / (case.clock.n_steps - 4 * case.steps_per_frame)
 
 
 def main(config_path="config/config.yaml"):

@@ -95,7 +95,11 @@ def run_case(study: dict, case, name: str = "explore", workdir=None) -> xr.Datas
     lucky-imaging results (as :func:`open_case`). ``case`` is the name of one of the
     study's cases, or a dict of overrides of its ``base`` (then called ``name``). The files
     go to ``workdir`` (kept), by default to a temporary folder removed afterwards. Keep
-    ``turbulence.duration_s`` short for exploration: the screens are made for all of it."""
+    ``turbulence.duration_s`` short for exploration: the screens are made for all of it.
+    Each step runs in a process of its own, on one thread, as the workflow's: the time loop
+    is the ``simulate`` step's, :func:`luckyao.study.simulation.run_time_loop` (its LGS
+    chain measured in the loop: the numbers of the workflow's replayed slopes and LGS twins,
+    ``tests/test_ao_loop.py``)."""
     from .study.config import (calibration_key, calibration_spec, canonical_json, commands_key, commands_spec,
                                lucky_settings, reconstructor_key, reconstructor_spec, turbulence_key,
                                turbulence_spec)

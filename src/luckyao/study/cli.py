@@ -67,23 +67,17 @@ def cmd_simulate(args) -> None:
     from .config import imaged_targets
     from .datasets import FrameWriter, open_dataset, provenance, write_dataset
     from .lgs_slopes import RecordedSlopes
-    from .simulation import lgs_chain, simulate, twin_lgs_rms_nm
-    from ..tomography.criterion import LgsRmsEstimator
+    from .simulation import run_time_loop, twin_lgs_rms_nm
     from .turbulence import read_screens
 
     config = json.loads(args.case)
     case = Case.from_config(config)
     screens = read_screens(args.screens, args.screens_metadata)
-    sensor = estimator = None
-    if args.reconstructor:
-        reconstructors = open_dataset(args.reconstructor, "reconstructor", allow_nan=())["reconstructor"].values
-    if args.slopes:  # an AO case: its LGS slopes measured by their product job
-        sensor = RecordedSlopes.open(args.slopes, config, args.seed)
-        estimator = LgsRmsEstimator(reconstructors, sensor.n_slopes)
-    elif args.reconstructor:
-        calibration = (open_dataset(args.calibration, "WFS calibration", allow_nan=()) if args.calibration
-                       else None)
-        sensor, estimator = lgs_chain(case, screens, reconstructors, args.seed, calibration)
+    reconstructors = (open_dataset(args.reconstructor, "reconstructor", allow_nan=())["reconstructor"].values
+                      if args.reconstructor else None)
+    # an AO case: its LGS slopes measured by their product job
+    slopes = RecordedSlopes.open(args.slopes, config, args.seed) if args.slopes else None
+    calibration = open_dataset(args.calibration, "WFS calibration", allow_nan=()) if args.calibration else None
     lgs_rms_nm = twin_lgs_rms_nm(args.lgs_telemetry, config, args.seed) if args.lgs_telemetry else None
     commands = None
     if args.commands:
@@ -94,8 +88,9 @@ def cmd_simulate(args) -> None:
     start = time.perf_counter()
     with FrameWriter(args.frames, imaged, case.n_frames, case.camera.n_pixels,
                      case.camera.pixel_scale_arcsec, attrs) as writer:
-        telemetry = simulate(case, screens, writer.write, sensor, estimator, commands, imaged,
-                             lgs_rms_nm=lgs_rms_nm)
+        telemetry = run_time_loop(case, screens, writer.write, args.seed, reconstructors=reconstructors,
+                                  calibration=calibration, slopes=slopes, commands=commands, lgs_rms_nm=lgs_rms_nm,
+                                  imaged_targets=imaged)
     elapsed = time.perf_counter() - start
     steps = case.clock.n_steps
     logging.getLogger(__name__).info("simulated %d steps in %.1f s: %.3f ms per step (with I/O)",

@@ -266,6 +266,26 @@ def simulate(case: Case, screens: ScreenSet, write_frames, sensor: LgsSensor | N
     )
 
 
+def run_time_loop(case: Case, screens: ScreenSet, write_frames, seed: int, *, reconstructors: np.ndarray | None = None,
+                  calibration=None, slopes=None, commands: tuple[np.ndarray, np.ndarray] | None = None,
+                  lgs_rms_nm: np.ndarray | None = None, imaged_targets=None) -> xr.Dataset:
+    """A case's time loop composed from its products: the one composition, which the workflow's
+    ``simulate`` step (so :func:`luckyao.run_case`, which runs that step) and the benchmarks call.
+
+    The LGS chain: ``slopes`` (an AO case's recorded slopes, :class:`.lgs_slopes.RecordedSlopes`)
+    replayed, or else, with ``reconstructors`` (target, point, slope), the case's sensor measured
+    in the loop with ``seed`` and the WFS ``calibration`` (:func:`lgs_chain`); its estimator from
+    ``reconstructors``. Without either, none: a no-AO case may be given its twin's ``lgs_rms_nm``
+    (target, frame) (:func:`twin_lgs_rms_nm`). ``commands`` (the command matrix and the DM
+    slopes) with AO. Then :func:`simulate` (``write_frames``, ``imaged_targets``: as there)."""
+    sensor = estimator = None
+    if slopes is not None:
+        sensor, estimator = slopes, LgsRmsEstimator(reconstructors, slopes.n_slopes)
+    elif reconstructors is not None:
+        sensor, estimator = lgs_chain(case, screens, reconstructors, seed, calibration)
+    return simulate(case, screens, write_frames, sensor, estimator, commands, imaged_targets, lgs_rms_nm=lgs_rms_nm)
+
+
 class Replay:
     """The science path of some of a case's targets replayed frame by frame, corrected by the
     recorded DM commands: called, an iterator of ``(start, frames (target, k, n, n))``, and the
