@@ -35,7 +35,7 @@ from bench_step import products  # noqa: E402
 
 from luckyao.study.case import Case  # noqa: E402
 from luckyao.study.config import imaged_targets, load_study, turbulence_spec  # noqa: E402
-from luckyao.study.simulation import Replay, run_time_loop  # noqa: E402
+from luckyao.study.simulation import Replay, TimeLoop  # noqa: E402
 from luckyao.study.turbulence import read_screens, write_screens  # noqa: E402
 
 N_STEPS = 600
@@ -45,10 +45,12 @@ REPLAY_PASSES = 1  # run_lucky reads a target selected and recentred by the star
 
 
 def loop_seconds(case: Case, screens, reconstructors, commands, calibration, imaged=None):
-    """Seconds of the case's time loop (``run_time_loop``, its set-up included) and its telemetry."""
+    """Seconds of the case's time loop (``TimeLoop.run``; the LGS chain's set-up not counted) and
+    its telemetry."""
+    loop = TimeLoop(case, screens, 1, reconstructors=reconstructors, calibration=calibration, commands=commands,
+                    imaged_targets=imaged)
     start = time.perf_counter()
-    telemetry = run_time_loop(case, screens, lambda start, block: None, 1, reconstructors=reconstructors,
-                              calibration=calibration, commands=commands, imaged_targets=imaged)
+    telemetry = loop.run(lambda start, block: None)
     return time.perf_counter() - start, telemetry
 
 

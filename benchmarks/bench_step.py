@@ -4,7 +4,7 @@ Single thread, screens for a short stretch of time (the per-step cost does not
 depend on the duration). First the stages of the default AO case
 (``ltao_r0_13.5cm``: LTAO, 4 Rayleigh LGS, 8x8 WFS, 9x9 DM, tomography, the
 lgs_rms and pseudo-closed-loop criteria), timed one by one; then the whole
-time loop (``simulation.run_time_loop``, frames discarded) of the no-AO case with LGS
+time loop (``simulation.TimeLoop``, frames discarded) of the no-AO case with LGS
 and of LTAO with 8x8, 16x16 and 32x32 WFS, run 5 times interleaved, each printed
 as ``ms_per_step_<case> <median>``; last, ``ms_per_step <median>``: the whole loop
 of the default AO case.
@@ -48,7 +48,7 @@ from luckyao.study.config import (calibration_spec, commands_spec, deep_merge, l
                                   reconstructor_spec, turbulence_spec, validate_study)
 from luckyao.study.reconstructor import build_commands, build_reconstructors  # noqa: E402
 from luckyao.study.resources import commands_bytes, frames_bytes, reconstructor_bytes, screens_bytes  # noqa: E402
-from luckyao.study.simulation import lgs_chain, run_time_loop  # noqa: E402
+from luckyao.study.simulation import TimeLoop, lgs_chain  # noqa: E402
 from luckyao.study.turbulence import read_screens, write_screens  # noqa: E402
 from luckyao.units import REFERENCE_WAVELENGTH_M  # noqa: E402
 
@@ -133,16 +133,16 @@ def stages(case: Case, screens, reconstructors, commands, calibration) -> dict:
 
 
 def whole_loop_ms(case: Case, screens, reconstructors, commands, calibration) -> float:
-    """ms per step of the time loop (``run_time_loop``, the LGS chain measured in it): the time
-    of the case's N_STEPS steps less that of its first 4 frames, over the steps between (so
-    set-up, e.g. the sensor and FFT plans, drops out); a first short run compiles what the case
-    needs."""
+    """ms per step of the time loop (``TimeLoop.run``, the LGS chain measured in it; the chain's
+    set-up before the clock starts): the time of the case's N_STEPS steps less that of its
+    first 4 frames, over the steps between (so set-up, e.g. FFT plans, drops out); a first
+    short run compiles what the case needs."""
     seconds = []
     for frames in (4, 4, case.n_frames):
-        run = dataclasses.replace(case, n_frames=frames)
+        loop = TimeLoop(dataclasses.replace(case, n_frames=frames), screens, 1, reconstructors=reconstructors,
+                        calibration=calibration, commands=commands)
         start = time.perf_counter()
-        run_time_loop(run, screens, lambda start, block: None, 1, reconstructors=reconstructors,
-                      calibration=calibration, commands=commands)
+        loop.run(lambda start, block: None)
         seconds.append(time.perf_counter() - start)
     return 1e3 * (seconds[2] - seconds[1]) / (case.clock.n_steps - 4 * case.steps_per_frame)
 

@@ -27,7 +27,7 @@ from luckyao.study import simulation
 from luckyao.study.case import Case
 from luckyao.study.config import commands_spec, deep_merge, load_study, reconstructor_spec, turbulence_spec
 from luckyao.study.reconstructor import build_commands, build_reconstructors
-from luckyao.study.simulation import run_time_loop
+from luckyao.study.simulation import TimeLoop
 from luckyao.study.turbulence import TurbulenceSpec, strip_specs
 from luckyao.tomography.reconstructor import pupil_points
 from luckyao.units import REFERENCE_WAVELENGTH_M
@@ -76,8 +76,8 @@ class _Setup:
 
     def simulate(self, cfg: dict, commands, frames: list | None = None):
         write = (lambda start, f: None) if frames is None else (lambda start, f: frames.append(f.copy()))
-        return run_time_loop(Case.from_config(cfg), self.screens, write, 5, reconstructors=self.reconstructors,
-                             commands=commands)
+        return TimeLoop(Case.from_config(cfg), self.screens, 5, reconstructors=self.reconstructors,
+                        commands=commands).run(write)
 
     def run(self, name: str, duration_s: float, mode: str = "ltao", **ao):
         if name not in self._runs:
@@ -225,8 +225,8 @@ def test_no_ao_case_takes_its_lgs_telemetry_from_its_twin(nine, study, tmp_path)
     path = tmp_path / "twin.nc"
     twin.attrs.update(provenance("twin", ltao_cfg, 5))
     write_dataset(twin, path)
-    given = run_time_loop(Case.from_config(none_cfg), nine.screens, lambda start, f: frames_given.append(f.copy()),
-                          5, lgs_rms_nm=twin_lgs_rms_nm(path, none_cfg, 5))
+    given = TimeLoop(Case.from_config(none_cfg), nine.screens, 5, lgs_rms_nm=twin_lgs_rms_nm(path, none_cfg, 5)
+                     ).run(lambda start, f: frames_given.append(f.copy()))
     assert given.identical(own)
     np.testing.assert_array_equal(np.concatenate(frames_given, 1), np.concatenate(frames_own, 1))
     with pytest.raises(ValueError, match="seed 6"):
@@ -264,9 +264,9 @@ def test_ao_cases_replay_the_slopes_their_lgs_chain_measured_once(nine, study, t
         built = build_commands(commands_spec(cfg))
         commands, frames_own, frames_replayed = (built.command_matrix.values, built.dm_slopes.values), [], []
         own = nine.simulate(cfg, commands, frames_own)
-        replayed = run_time_loop(Case.from_config(cfg), nine.screens, lambda start, f: frames_replayed.append(f.copy()),
-                                 5, reconstructors=nine.reconstructors, slopes=RecordedSlopes.open(path, cfg, 5),
-                                 commands=commands)
+        replayed = TimeLoop(Case.from_config(cfg), nine.screens, 5, reconstructors=nine.reconstructors,
+                            slopes=RecordedSlopes.open(path, cfg, 5), commands=commands
+                            ).run(lambda start, f: frames_replayed.append(f.copy()))
         assert replayed.identical(own), ao
         np.testing.assert_array_equal(np.concatenate(frames_replayed, 1), np.concatenate(frames_own, 1))
     with pytest.raises(ValueError, match="seed 6"):

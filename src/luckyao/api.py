@@ -97,7 +97,7 @@ def run_case(study: dict, case, name: str = "explore", workdir=None) -> xr.Datas
     go to ``workdir`` (kept), by default to a temporary folder removed afterwards. Keep
     ``turbulence.duration_s`` short for exploration: the screens are made for all of it.
     Each step runs in a process of its own, on one thread, as the workflow's: the time loop
-    is the ``simulate`` step's, :func:`luckyao.study.simulation.run_time_loop` (its LGS
+    is the ``simulate`` step's, :class:`luckyao.study.simulation.TimeLoop` (its LGS
     chain measured in the loop: the numbers of the workflow's replayed slopes and LGS twins,
     ``tests/test_ao_loop.py``)."""
     from .study.config import (calibration_key, calibration_spec, canonical_json, commands_key, commands_spec,

@@ -67,7 +67,7 @@ def cmd_simulate(args) -> None:
     from .config import imaged_targets
     from .datasets import FrameWriter, open_dataset, provenance, write_dataset
     from .lgs_slopes import RecordedSlopes
-    from .simulation import run_time_loop, twin_lgs_rms_nm
+    from .simulation import TimeLoop, twin_lgs_rms_nm
     from .turbulence import read_screens
 
     config = json.loads(args.case)
@@ -88,9 +88,9 @@ def cmd_simulate(args) -> None:
     start = time.perf_counter()
     with FrameWriter(args.frames, imaged, case.n_frames, case.camera.n_pixels,
                      case.camera.pixel_scale_arcsec, attrs) as writer:
-        telemetry = run_time_loop(case, screens, writer.write, args.seed, reconstructors=reconstructors,
-                                  calibration=calibration, slopes=slopes, commands=commands, lgs_rms_nm=lgs_rms_nm,
-                                  imaged_targets=imaged)
+        telemetry = TimeLoop(case, screens, args.seed, reconstructors=reconstructors, calibration=calibration,
+                             slopes=slopes, commands=commands, lgs_rms_nm=lgs_rms_nm, imaged_targets=imaged
+                             ).run(writer.write)
     elapsed = time.perf_counter() - start
     steps = case.clock.n_steps
     logging.getLogger(__name__).info("simulated %d steps in %.1f s: %.3f ms per step (with I/O)",

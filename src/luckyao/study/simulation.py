@@ -266,24 +266,34 @@ def simulate(case: Case, screens: ScreenSet, write_frames, sensor: LgsSensor | N
     )
 
 
-def run_time_loop(case: Case, screens: ScreenSet, write_frames, seed: int, *, reconstructors: np.ndarray | None = None,
-                  calibration=None, slopes=None, commands: tuple[np.ndarray, np.ndarray] | None = None,
-                  lgs_rms_nm: np.ndarray | None = None, imaged_targets=None) -> xr.Dataset:
+class TimeLoop:
     """A case's time loop composed from its products: the one composition, which the workflow's
-    ``simulate`` step (so :func:`luckyao.run_case`, which runs that step) and the benchmarks call.
+    ``simulate`` step (so :func:`luckyao.run_case`, which runs that step) and the benchmarks use.
 
     The LGS chain: ``slopes`` (an AO case's recorded slopes, :class:`.lgs_slopes.RecordedSlopes`)
     replayed, or else, with ``reconstructors`` (target, point, slope), the case's sensor measured
     in the loop with ``seed`` and the WFS ``calibration`` (:func:`lgs_chain`); its estimator from
     ``reconstructors``. Without either, none: a no-AO case may be given its twin's ``lgs_rms_nm``
     (target, frame) (:func:`twin_lgs_rms_nm`). ``commands`` (the command matrix and the DM
-    slopes) with AO. Then :func:`simulate` (``write_frames``, ``imaged_targets``: as there)."""
-    sensor = estimator = None
-    if slopes is not None:
-        sensor, estimator = slopes, LgsRmsEstimator(reconstructors, slopes.n_slopes)
-    elif reconstructors is not None:
-        sensor, estimator = lgs_chain(case, screens, reconstructors, seed, calibration)
-    return simulate(case, screens, write_frames, sensor, estimator, commands, imaged_targets, lgs_rms_nm=lgs_rms_nm)
+    slopes) with AO; ``imaged_targets`` as :func:`simulate`'s. Built here (the sensor's set-up
+    takes seconds, which a benchmark leaves out of its timing); :meth:`run` runs it once.
+    """
+
+    def __init__(self, case: Case, screens: ScreenSet, seed: int, *, reconstructors: np.ndarray | None = None,
+                 calibration=None, slopes=None, commands: tuple[np.ndarray, np.ndarray] | None = None,
+                 lgs_rms_nm: np.ndarray | None = None, imaged_targets=None):
+        self.case, self.screens, self.commands = case, screens, commands
+        self.lgs_rms_nm, self.imaged_targets = lgs_rms_nm, imaged_targets
+        self.sensor = self.estimator = None
+        if slopes is not None:
+            self.sensor, self.estimator = slopes, LgsRmsEstimator(reconstructors, slopes.n_slopes)
+        elif reconstructors is not None:
+            self.sensor, self.estimator = lgs_chain(case, screens, reconstructors, seed, calibration)
+
+    def run(self, write_frames) -> xr.Dataset:
+        """:func:`simulate` of the case (``write_frames`` as there): its telemetry."""
+        return simulate(self.case, self.screens, write_frames, self.sensor, self.estimator, self.commands,
+                        self.imaged_targets, lgs_rms_nm=self.lgs_rms_nm)
 
 
 class Replay:
