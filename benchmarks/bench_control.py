@@ -9,10 +9,10 @@ the DM slopes matrix, and the peak RSS (each pair in a fresh subprocess).
 Run: .venv/bin/python benchmarks/bench_control.py
 """
 
-import os
 
-for _name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS"):
-    os.environ[_name] = "1"
+from luckyao.threads import pin_one_thread  # no numpy: before it is imported
+
+pin_one_thread()
 
 import resource  # noqa: E402
 import subprocess  # noqa: E402

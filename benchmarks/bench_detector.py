@@ -12,10 +12,10 @@ or with ``--frames-file`` a study's (e.g. ``results/cases/ltao_r0_13.5cm/frames.
 Run: .venv/bin/python benchmarks/bench_detector.py [--repeats 7] [--frames-file FRAMES.nc]
 """
 
-import os
 
-for _name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS"):
-    os.environ[_name] = "1"
+from luckyao.threads import pin_one_thread  # no numpy: before it is imported
+
+pin_one_thread()
 
 import argparse  # noqa: E402
 import time  # noqa: E402

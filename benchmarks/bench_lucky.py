@@ -30,10 +30,10 @@ Run: .venv/bin/python benchmarks/bench_lucky.py [--frames 256] [--cube 25000] [-
      [--frames-file FRAMES.nc] [--registrations cog windowed_cog peak xcorr]
 """
 
-import os
 
-for _name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS"):
-    os.environ[_name] = "1"
+from luckyao.threads import pin_one_thread  # no numpy: before it is imported
+
+pin_one_thread()
 
 import argparse  # noqa: E402
 import resource  # noqa: E402

@@ -4,7 +4,7 @@ Single thread, screens for a short stretch of time (the per-step cost does not
 depend on the duration). First the stages of the default AO case
 (``ltao_r0_13.5cm``: LTAO, 4 Rayleigh LGS, 8x8 WFS, 9x9 DM, tomography, the
 lgs_rms and pseudo-closed-loop criteria), timed one by one; then the whole
-time loop (``simulation.simulate``, frames discarded) of the no-AO case with LGS
+time loop (``simulation.TimeLoop``, frames discarded) of the no-AO case with LGS
 and of LTAO with 8x8, 16x16 and 32x32 WFS, run 5 times interleaved, each printed
 as ``ms_per_step_<case> <median>``; last, ``ms_per_step <median>``: the whole loop
 of the default AO case.
@@ -24,10 +24,10 @@ power law a D^b with its value at 39 m, and the study's own file-size estimates 
 import argparse
 import dataclasses
 import json
-import os
 
-for _name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS"):
-    os.environ[_name] = "1"
+from luckyao.threads import pin_one_thread  # no numpy: before it is imported
+
+pin_one_thread()
 
 import resource  # noqa: E402
 import subprocess  # noqa: E402
@@ -42,15 +42,15 @@ from luckyao.ao.correction import OpenLoopCorrection  # noqa: E402
 from luckyao.optics.imaging import Imager  # noqa: E402
 from luckyao.optics.propagation import Propagator  # noqa: E402
 from luckyao.optics.pupil import TiltRemover  # noqa: E402
-from luckyao.studyspec.case import Case  # noqa: E402
-from luckyao.steps.calibration import build_calibration  # noqa: E402
-from luckyao.studyspec.products import calibration_spec, commands_spec, reconstructor_spec, turbulence_spec
-from luckyao.studyspec.schema import deep_merge
-from luckyao.studyspec.study import load_study, validate_study
-from luckyao.steps.reconstructor import build_commands, build_reconstructors  # noqa: E402
 from luckyao.jobs.resources import commands_bytes, frames_bytes, reconstructor_bytes, screens_bytes  # noqa: E402
-from luckyao.steps.simulation import lgs_chain, simulate  # noqa: E402
+from luckyao.steps.calibration import build_calibration  # noqa: E402
+from luckyao.steps.reconstructor import build_commands, build_reconstructors  # noqa: E402
 from luckyao.steps.screens import read_screens, write_screens  # noqa: E402
+from luckyao.steps.simulation import TimeLoop, lgs_chain  # noqa: E402
+from luckyao.studyspec.case import Case  # noqa: E402
+from luckyao.studyspec.products import calibration_spec, commands_spec, reconstructor_spec, turbulence_spec  # noqa: E402
+from luckyao.studyspec.schema import deep_merge  # noqa: E402
+from luckyao.studyspec.study import load_study, validate_study  # noqa: E402
 from luckyao.units import REFERENCE_WAVELENGTH_M  # noqa: E402
 
 N_STEPS = 800
@@ -86,19 +86,20 @@ def stages(case: Case, screens, reconstructors, commands, calibration) -> dict:
         imager.intensity(propagator.sample_valid([step], case.layer_scales([step]))[0] * to_camera)
     sensor, estimator = lgs_chain(case, screens, reconstructors, 1, calibration)
     surface = case.ao.deformable_mirror(case.telescope).grid_surface(imager.grid, imager.mask)
-    correction = OpenLoopCorrection(*commands, surface, sensor.exposure_steps, case.ao.delay_steps,
-                                        case.steps_per_frame)
-    e, spf = sensor.exposure_steps, case.steps_per_frame
+    clock = case.clock
+    correction = OpenLoopCorrection(*commands, surface, clock.exposure_steps, case.ao.delay_steps,
+                                        clock.steps_per_frame)
+    e, spf = clock.exposure_steps, clock.steps_per_frame
     estimator.rms_nm(sensor.exposure_slopes(np.arange(e), case.layer_scales(np.arange(e))))
     names = ["LGS propagation", "WFS", "reconstruction", "DM commands + residual", "science propagation",
              "DM surface", "science image", "truth rms", "frame"]
     spent = dict.fromkeys(names, 0.0)
     intensity = np.zeros((len(case.targets), imager.fft_size, imager.fft_size), dtype=np.float32)
     for frame in range(N_STEPS // spf):
-        steps = frame * spf + np.arange(spf)
+        steps = clock.steps(frame)
         layer_scales = case.layer_scales(steps)
         slopes = []
-        for i in range(0, spf, e):
+        for i in clock.exposure_offsets():
             t0 = time.perf_counter()
             sensor.sample(steps[i:i + e], layer_scales[i:i + e])
             t1 = time.perf_counter()
@@ -109,9 +110,10 @@ def stages(case: Case, screens, reconstructors, commands, calibration) -> dict:
         slopes = np.stack(slopes)
         estimator.rms_nm(slopes)
         t1 = time.perf_counter()
-        for start, exposure in zip(steps[::e], slopes):
+        starts = clock.exposure_starts(steps)
+        for start, exposure in zip(starts, slopes):
             correction.measure(int(start), exposure)
-        estimator.rms_nm(np.stack([correction.residual_slopes(int(s), x) for s, x in zip(steps[::e], slopes)]))
+        estimator.rms_nm(np.stack([correction.residual_slopes(int(s), x) for s, x in zip(starts, slopes)]))
         t2 = time.perf_counter()
         phases = propagator.sample_valid(steps, layer_scales)
         t3 = time.perf_counter()
@@ -132,17 +134,18 @@ def stages(case: Case, screens, reconstructors, commands, calibration) -> dict:
 
 
 def whole_loop_ms(case: Case, screens, reconstructors, commands, calibration) -> float:
-    """ms per step of ``simulate``: the time of the case's N_STEPS steps less that of
-    its first 4 frames, over the steps between (so set-up, e.g. FFT plans, drops out);
-    a first short run compiles what the case needs."""
+    """ms per step of the time loop (``TimeLoop.run``, the LGS chain measured in it; the chain's
+    set-up before the clock starts): the time of the case's N_STEPS steps less that of its
+    first 4 frames, over the steps between (so set-up, e.g. FFT plans, drops out); a first
+    short run compiles what the case needs."""
     seconds = []
     for frames in (4, 4, case.n_frames):
-        run = dataclasses.replace(case, n_frames=frames)
-        sensor, estimator = lgs_chain(run, screens, reconstructors, 1, calibration)
+        loop = TimeLoop(dataclasses.replace(case, n_frames=frames), screens, 1, reconstructors=reconstructors,
+                        calibration=calibration, commands=commands)
         start = time.perf_counter()
-        simulate(run, screens, lambda start, block: None, sensor, estimator, commands)
+        loop.run(lambda start, block: None)
         seconds.append(time.perf_counter() - start)
-    return 1e3 * (seconds[2] - seconds[1]) / ((case.n_frames - 4) * case.steps_per_frame)
+    return 1e3 * (seconds[2] - seconds[1]) / (case.clock.n_steps - 4 * case.steps_per_frame)
 
 
 def main(config_path="config/config.yaml"):

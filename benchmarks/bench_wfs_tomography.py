@@ -11,10 +11,10 @@ subprocess so its peak RSS is its own).
 Run: .venv/bin/python benchmarks/bench_wfs_tomography.py
 """
 
-import os
 
-for _name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS"):
-    os.environ[_name] = "1"
+from luckyao.threads import pin_one_thread  # no numpy: before it is imported
+
+pin_one_thread()
 
 import resource  # noqa: E402
 import subprocess  # noqa: E402

@@ -24,13 +24,13 @@ import pytest
 from luckyao.atmosphere.screens import ScreenSet, strip_screen
 from luckyao.optics.imaging import Imager
 from luckyao.steps import simulation
+from luckyao.steps.reconstructor import build_commands, build_reconstructors
+from luckyao.steps.screens import TurbulenceSpec, strip_specs
+from luckyao.steps.simulation import TimeLoop
 from luckyao.studyspec.case import Case
 from luckyao.studyspec.products import commands_spec, reconstructor_spec, turbulence_spec
 from luckyao.studyspec.schema import deep_merge
 from luckyao.studyspec.study import load_study
-from luckyao.steps.reconstructor import build_commands, build_reconstructors
-from luckyao.steps.simulation import lgs_chain, simulate
-from luckyao.steps.screens import TurbulenceSpec, strip_specs
 from luckyao.tomography.reconstructor import pupil_points
 from luckyao.units import REFERENCE_WAVELENGTH_M
 from luckyao.wfs.sensor import LgsSensor
@@ -77,10 +77,9 @@ class _Setup:
         return self._commands[mode]
 
     def simulate(self, cfg: dict, commands, frames: list | None = None):
-        case = Case.from_config(cfg)
-        sensor, estimator = lgs_chain(case, self.screens, self.reconstructors, seed=5)
         write = (lambda start, f: None) if frames is None else (lambda start, f: frames.append(f.copy()))
-        return simulate(case, self.screens, write, sensor, estimator, commands)
+        return TimeLoop(Case.from_config(cfg), self.screens, 5, reconstructors=self.reconstructors,
+                        commands=commands).run(write)
 
     def run(self, name: str, duration_s: float, mode: str = "ltao", **ao):
         if name not in self._runs:
@@ -228,8 +227,8 @@ def test_no_ao_case_takes_its_lgs_telemetry_from_its_twin(nine, study, tmp_path)
     path = tmp_path / "twin.nc"
     twin.attrs.update(provenance("twin", ltao_cfg, 5))
     write_dataset(twin, path)
-    given = simulate(Case.from_config(none_cfg), nine.screens, lambda start, f: frames_given.append(f.copy()),
-                     lgs_rms_nm=twin_lgs_rms_nm(path, none_cfg, 5))
+    given = TimeLoop(Case.from_config(none_cfg), nine.screens, 5, lgs_rms_nm=twin_lgs_rms_nm(path, none_cfg, 5)
+                     ).run(lambda start, f: frames_given.append(f.copy()))
     assert given.identical(own)
     np.testing.assert_array_equal(np.concatenate(frames_given, 1), np.concatenate(frames_own, 1))
     with pytest.raises(ValueError, match="seed 6"):
@@ -244,10 +243,9 @@ def test_ao_cases_replay_the_slopes_their_lgs_chain_measured_once(nine, study, t
     share one LGS slopes product (``config.slopes_spec``: the sensor is open loop); an AO
     simulation replaying it gives telemetry and frames bit-identical to measuring the slopes
     in its own loop. The product is refused for another LGS chain (a 16x16 WFS) or seed."""
-    from luckyao.studyspec.products import lgs_chain_config, slopes_key, slopes_spec
     from luckyao.io.datasets import provenance, write_dataset
     from luckyao.steps.lgs_slopes import RecordedSlopes, measure_lgs_slopes
-    from luckyao.tomography.criterion import LgsRmsEstimator
+    from luckyao.studyspec.products import lgs_chain_config, slopes_key, slopes_spec
 
     config, cases = study
     shared = {slopes_key(slopes_spec(config, cases[name]))
@@ -268,9 +266,9 @@ def test_ao_cases_replay_the_slopes_their_lgs_chain_measured_once(nine, study, t
         built = build_commands(commands_spec(cfg))
         commands, frames_own, frames_replayed = (built.command_matrix.values, built.dm_slopes.values), [], []
         own = nine.simulate(cfg, commands, frames_own)
-        sensor = RecordedSlopes.open(path, cfg, 5)
-        replayed = simulate(Case.from_config(cfg), nine.screens, lambda start, f: frames_replayed.append(f.copy()),
-                            sensor, LgsRmsEstimator(nine.reconstructors, sensor.n_slopes), commands)
+        replayed = TimeLoop(Case.from_config(cfg), nine.screens, 5, reconstructors=nine.reconstructors,
+                            slopes=RecordedSlopes.open(path, cfg, 5), commands=commands
+                            ).run(lambda start, f: frames_replayed.append(f.copy()))
         assert replayed.identical(own), ao
         np.testing.assert_array_equal(np.concatenate(frames_replayed, 1), np.concatenate(frames_own, 1))
     with pytest.raises(ValueError, match="seed 6"):

@@ -267,47 +267,47 @@ def _xoshiro256pp(state):
 def test_vector_generators_step_as_xoshiro256pp():
     """The LANES generators stepped as one vector (:func:`.stream_vectors.xoshiro_fill`) give,
     value for value, the authors' scalar xoshiro256++ of each generator in turn, and leave its state."""
-    from luckyao.lucky import kernels
+    from luckyao.lucky import noise_streams
     rng = np.random.default_rng(0)
-    lanes = rng.integers(0, 2**63, (4, kernels.LANES), dtype=np.uint64) * np.uint64(2) + np.uint64(1)
-    states = [[int(lanes[w, g]) for w in range(4)] for g in range(kernels.LANES)]
-    out = np.empty(kernels.LANES * 37, np.uint64)
-    kernels._fill_bits(lanes, out)
-    expected = [_xoshiro256pp(states[i % kernels.LANES]) for i in range(out.size)]
+    lanes = rng.integers(0, 2**63, (4, noise_streams.LANES), dtype=np.uint64) * np.uint64(2) + np.uint64(1)
+    states = [[int(lanes[w, g]) for w in range(4)] for g in range(noise_streams.LANES)]
+    out = np.empty(noise_streams.LANES * 37, np.uint64)
+    noise_streams._fill_bits(lanes, out)
+    expected = [_xoshiro256pp(states[i % noise_streams.LANES]) for i in range(out.size)]
     assert [int(v) for v in out] == expected
-    assert [[int(lanes[w, g]) for w in range(4)] for g in range(kernels.LANES)] == states
+    assert [[int(lanes[w, g]) for w in range(4)] for g in range(noise_streams.LANES)] == states
     assert _xoshiro256pp([1, 2, 3, 4]) == (5 << 23) + 1  # rotl(1 + 4, 23) + 1
 
 
 def test_rectangle_test_of_16_words_is_the_scalar_ziggurats():
     """The vector rectangle test (:func:`.stream_vectors.ziggurat_rectangle`) gives, bit for bit, the
     scalar ziggurat's deviate ``±m w[layer]`` (float32) of every word, and fails exactly the words
-    of ``m >= k[layer]``; :func:`.kernels._normals` keeps the deviates that pass."""
+    of ``m >= k[layer]``; :func:`.noise_streams._normals` keeps the deviates that pass."""
     import numba
 
-    from luckyao.lucky import kernels
+    from luckyao.lucky import noise_streams
     from luckyao.lucky.stream_vectors import ziggurat_rectangle
 
     @numba.njit
     def rectangle(words, out):
         failed = np.empty(words.size, np.bool_)
         for start in range(0, words.size, 16):
-            mask = ziggurat_rectangle(words, start, kernels._ZW, kernels._ZK32, out)
+            mask = ziggurat_rectangle(words, start, noise_streams._ZW, noise_streams._ZK32, out)
             for k in range(16):
                 failed[start + k] = (mask >> k) & 1
         return failed
 
     words = np.random.default_rng(1).integers(-2**31, 2**31, 16 * 4096, dtype=np.int64).astype(np.int32)
     layer, magnitude = words & 0xFF, (words >> 9) & 0x7FFFFF
-    deviate = magnitude.astype(np.float32) * kernels._ZW[layer]
+    deviate = magnitude.astype(np.float32) * noise_streams._ZW[layer]
     deviate = np.where((words >> 8) & 1, -deviate, deviate)
     out = np.full(words.size, np.nan, np.float32)
     failed = rectangle(words, out)
-    np.testing.assert_array_equal(failed, magnitude >= kernels._ZK32[layer])
+    np.testing.assert_array_equal(failed, magnitude >= noise_streams._ZK32[layer])
     assert 0.005 < failed.mean() < 0.03  # the rare slow path (~1.5%)
     np.testing.assert_array_equal(out.view(np.int32), deviate.view(np.int32))
     normals = np.empty(words.size, np.float32)
-    kernels._normals(words, normals, np.array([1, 2, 3, 4], np.uint64))
+    noise_streams._normals(words, normals, np.array([1, 2, 3, 4], np.uint64))
     np.testing.assert_array_equal(normals[~failed].view(np.int32), deviate[~failed].view(np.int32))
 
 
@@ -316,11 +316,11 @@ def test_frame_sums_add_each_row_and_column_in_pixel_order(n):
     """Row and column sums of detected frames are float64 sums in the order of the pixels (what the
     centre of gravity and the flux are made of: no reordering by the compiler), the peak the
     largest pixel."""
-    from luckyao.lucky import kernels
+    from luckyao.lucky import noise_streams
     rng = np.random.default_rng(2)
     frames = (rng.standard_normal((3, n, n)) * 10.0 ** rng.uniform(-4, 4, (3, n, n))).astype(np.float32)
     rows, cols, peak = np.empty((3, n)), np.empty((3, n)), np.empty(3, np.float32)
-    kernels.frame_sums(frames, rows, cols, peak)
+    noise_streams.frame_sums(frames, rows, cols, peak)
     values = frames.astype(np.float64)
     np.testing.assert_array_equal(rows, np.add.accumulate(values, axis=2)[:, :, -1])
     np.testing.assert_array_equal(cols, np.add.accumulate(values, axis=1)[:, -1, :])

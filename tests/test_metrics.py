@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from scipy import integrate, optimize, special
 
-from luckyao.lucky import kernels
+from luckyao.lucky import radial_sums
 from luckyao.lucky.metrics import (
     EncircledEnergy,
     centroid_px,
@@ -233,14 +233,14 @@ def test_radial_sums_about_several_centres_give_each_centres_encircled_energy():
 
 def test_radial_sums_of_a_centre_are_the_same_alone_or_among_others():
     """The kernel vectorises over a row's frequencies for a few centres and over the centres for
-    many (kernels.RADIAL_CENTRES_INNER): the same operations on each term, so a centre's sums are
+    many (radial_sums.RADIAL_CENTRES_INNER): the same operations on each term, so a centre's sums are
     bit for bit the same alone, among a few or among many."""
     ee = EncircledEnergy(64)
     image = np.random.default_rng(7).poisson(300 * gaussian_images(64, np.array([[31.2, 32.6]]), 1.5)).astype(
         np.float32)
-    centres = np.random.default_rng(8).uniform(26, 38, (1, 2 * kernels.RADIAL_CENTRES_INNER + 3, 2))
+    centres = np.random.default_rng(8).uniform(26, 38, (1, 2 * radial_sums.RADIAL_CENTRES_INNER + 3, 2))
     many = ee.radial_sums_about(image, centres)[0]
-    for m in (1, 3, kernels.RADIAL_CENTRES_INNER - 1, kernels.RADIAL_CENTRES_INNER):
+    for m in (1, 3, radial_sums.RADIAL_CENTRES_INNER - 1, radial_sums.RADIAL_CENTRES_INNER):
         np.testing.assert_array_equal(ee.radial_sums_about(image, centres[:, :m])[0], many[:m])
 
 
@@ -277,7 +277,7 @@ def test_component_and_dilation_kernels_match_scipy():
     3 x 3 dilation used by fwhm_arcsec give scipy.ndimage's masks."""
     from scipy import ndimage
 
-    from luckyao.lucky.kernels import component, dilate
+    from luckyao.lucky.image_helpers import component, dilate
     rng = np.random.default_rng(3)
     for _ in range(20):
         values = ndimage.uniform_filter(rng.random((40, 37)), 3)

@@ -294,11 +294,11 @@ def test_the_declared_memory_of_a_subpixel_method_is_its_vector():
 
 
 def test_the_vectors_are_added_to_their_rows_in_frame_order_bit_for_bit():
-    """``kernels.add_rows`` (tiled over the vector's elements) gives each row exactly the sums of
+    """``adds.add_rows`` (tiled over the vector's elements) gives each row exactly the sums of
     adding the frames' vectors one after another, in frame order (float64 addition is not
     associative, so any other order would differ): vectors longer than a tile and not a multiple
     of it, frames in no row (-1), a row taking several frames, and frames taken out (sign -1)."""
-    from luckyao.lucky import kernels
+    from luckyao.lucky import adds
 
     rng = np.random.default_rng(5)
     k, m, n_rows = 40, 1301, 9
@@ -312,10 +312,10 @@ def test_the_vectors_are_added_to_their_rows_in_frame_order_bit_for_bit():
             for r in rows[j][rows[j] >= 0]:
                 expected[r, :m] += sign * vectors[j]
         partial = start.copy()
-        kernels.add_rows(vectors, rows, partial, sign)
+        adds.add_rows(vectors, rows, partial, sign)
         assert np.array_equal(partial, expected)
         reordered = start.copy()
-        kernels.add_rows(vectors[::-1].copy(), rows[::-1].copy(), reordered, sign)
+        adds.add_rows(vectors[::-1].copy(), rows[::-1].copy(), reordered, sign)
         assert not np.array_equal(reordered, expected)  # the order is what is tested
 
 

@@ -52,13 +52,13 @@ def test_same_seed_same_numbers_other_seed_other_numbers():
 _CACHE_SCRIPT = """
 import sys
 import numpy as np
-from luckyao.lucky import kernels
+from luckyao.lucky import radial_sums
 from luckyao.lucky.detector import Detector, KeyedNoise
 from luckyao.lucky.metrics import EncircledEnergy
 ee = EncircledEnergy(64)
 image = np.random.default_rng(9).random((1, 64, 64)).astype(np.float32)
-centres = np.random.default_rng(10).uniform(20, 44, (1, 2 * kernels.RADIAL_CENTRES_INNER, 2))
-out = [ee.radial_sums_about(image, centres[:, :m]) for m in (3, 2 * kernels.RADIAL_CENTRES_INNER)]
+centres = np.random.default_rng(10).uniform(20, 44, (1, 2 * radial_sums.RADIAL_CENTRES_INNER, 2))
+out = [ee.radial_sums_about(image, centres[:, :m]) for m in (3, 2 * radial_sums.RADIAL_CENTRES_INNER)]
 out.append(ee.energies_binned(image, centres[:, 0]))
 chunk = KeyedNoise(64, 2).prepare(np.concatenate([image, image]) / image.sum())
 for photons in (100.0, 3000.0):  # photons placed one by one, and pixel by pixel

@@ -12,7 +12,7 @@ import luckyao
 from luckyao.simd import LANES, transpose
 
 INLINED = {"optics/propagation.py": ("optics/taps.py", "simd.py"), "wfs/kernels.py": ("simd.py",),
-           "lucky/kernels.py": ("lucky/stream_vectors.py", "simd.py")}
+           "lucky/noise_streams.py": ("lucky/stream_vectors.py", "simd.py"), "lucky/radial_sums.py": ("simd.py",)}
 """Files of cached kernels -> the files of the intrinsics those kernels inline."""
 
 

@@ -27,6 +27,7 @@ import xarray as xr
 from .studyspec.lucky import SIGNAL_KINDS
 from .studyspec.schema import ConfigError
 from .studyspec.study import load_study as _load_study, validate_study
+from .threads import ONE_THREAD
 
 __all__ = ["open_case", "open_telemetry", "open_figure", "draw", "load_study", "run_case", "export_fits"]
 
@@ -82,15 +83,10 @@ def export_fits(lucky_path, out_path, detectors=None) -> int:
     return export(lucky_path, out_path, detectors)
 
 
-ONE_THREAD = {name: "1" for name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS",
-                                      "NUMBA_NUM_THREADS")}
-"""The numerical libraries pinned to one thread, as the workflow runs every step
-(``workflow/rules/common.smk``): the same rounding, so the same numbers."""
-
-
 def _step(*argv: str) -> None:
     """One workflow step, run as the workflow runs it: ``python -m luckyao <step> ...``
-    with the libraries on one thread; a failure raises with the step's own message."""
+    with the libraries on one thread (:mod:`luckyao.threads`, as the workflow runs every step: the
+    same rounding, so the same numbers); a failure raises with the step's own message."""
     done = subprocess.run([sys.executable, "-m", "luckyao", *argv], env={**os.environ, **ONE_THREAD},
                           capture_output=True, text=True)
     if done.returncode:
@@ -103,7 +99,11 @@ def run_case(study: dict, case, name: str = "explore", workdir=None) -> xr.Datas
     lucky-imaging results (as :func:`open_case`). ``case`` is the name of one of the
     study's cases, or a dict of overrides of its ``base`` (then called ``name``). The files
     go to ``workdir`` (kept), by default to a temporary folder removed afterwards. Keep
-    ``turbulence.duration_s`` short for exploration: the screens are made for all of it."""
+    ``turbulence.duration_s`` short for exploration: the screens are made for all of it.
+    Each step runs in a process of its own, on one thread, as the workflow's: the time loop
+    is the ``simulate`` step's, :class:`luckyao.steps.simulation.TimeLoop` (its LGS
+    chain measured in the loop: the numbers of the workflow's replayed slopes and LGS twins,
+    ``tests/test_ao_loop.py``)."""
     from .studyspec.products import (calibration_key, calibration_spec, commands_key, commands_spec, reconstructor_key,
                                 reconstructor_spec, turbulence_key, turbulence_spec)
     from .io.hashing import canonical_json

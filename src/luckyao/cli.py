@@ -68,27 +68,21 @@ def cmd_turbulence(args) -> None:
 
 
 def cmd_simulate(args) -> None:
-    from .studyspec.case import Case
-    from .studyspec.resolved import imaged_targets
     from .io.datasets import FrameWriter, open_dataset, provenance, write_dataset
     from .steps.lgs_slopes import RecordedSlopes
-    from .steps.simulation import lgs_chain, simulate, twin_lgs_rms_nm
-    from .tomography.criterion import LgsRmsEstimator
     from .steps.screens import read_screens
+    from .steps.simulation import TimeLoop, twin_lgs_rms_nm
+    from .studyspec.case import Case
+    from .studyspec.resolved import imaged_targets
 
     config = json.loads(args.case)
     case = Case.from_config(config)
     screens = read_screens(args.screens, args.screens_metadata)
-    sensor = estimator = None
-    if args.reconstructor:
-        reconstructors = open_dataset(args.reconstructor, "reconstructor", allow_nan=())["reconstructor"].values
-    if args.slopes:  # an AO case: its LGS slopes measured by their product job
-        sensor = RecordedSlopes.open(args.slopes, config, args.seed)
-        estimator = LgsRmsEstimator(reconstructors, sensor.n_slopes)
-    elif args.reconstructor:
-        calibration = (open_dataset(args.calibration, "WFS calibration", allow_nan=()) if args.calibration
-                       else None)
-        sensor, estimator = lgs_chain(case, screens, reconstructors, args.seed, calibration)
+    reconstructors = (open_dataset(args.reconstructor, "reconstructor", allow_nan=())["reconstructor"].values
+                      if args.reconstructor else None)
+    # an AO case: its LGS slopes measured by their product job
+    slopes = RecordedSlopes.open(args.slopes, config, args.seed) if args.slopes else None
+    calibration = open_dataset(args.calibration, "WFS calibration", allow_nan=()) if args.calibration else None
     lgs_rms_nm = twin_lgs_rms_nm(args.lgs_telemetry, config, args.seed) if args.lgs_telemetry else None
     commands = None
     if args.commands:
@@ -99,10 +93,11 @@ def cmd_simulate(args) -> None:
     start = time.perf_counter()
     with FrameWriter(args.frames, imaged, case.n_frames, case.camera.n_pixels,
                      case.camera.pixel_scale_arcsec, attrs) as writer:
-        telemetry = simulate(case, screens, writer.write, sensor, estimator, commands, imaged,
-                             lgs_rms_nm=lgs_rms_nm)
+        telemetry = TimeLoop(case, screens, args.seed, reconstructors=reconstructors, calibration=calibration,
+                             slopes=slopes, commands=commands, lgs_rms_nm=lgs_rms_nm, imaged_targets=imaged
+                             ).run(writer.write)
     elapsed = time.perf_counter() - start
-    steps = case.n_frames * case.steps_per_frame
+    steps = case.clock.n_steps
     logging.getLogger(__name__).info("simulated %d steps in %.1f s: %.3f ms per step (with I/O)",
                                      steps, elapsed, 1e3 * elapsed / steps)
     telemetry.attrs.update(provenance(f"luckyao telemetry of case {args.name}", config, args.seed))

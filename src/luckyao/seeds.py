@@ -5,10 +5,14 @@
   WFS_NOISE_STREAM])`` (:func:`wfs_noise_rng`); the tag lies above every layer index, so the
   WFS noise never replays a layer's numbers (``SeedSequence`` ignores trailing zero words, so
   the streams differ by a nonzero word, not by their length).
+* WFS calibration (the turbulence draws of its dithers): ``default_rng([seed,
+  CALIBRATION_STREAM])`` (:func:`calibration_rng`); the layer indices stay below its tag.
 * Lucky-camera detector noise: target ``t`` of a case uses the seed ``seed + t``
   (:func:`target_seed`), and frame ``f`` of detector ``name`` draws from compiled streams keyed
-  by ``(seed + t, detector_key(name), f)`` (:func:`luckyao.lucky.kernels.stream_key`; a
-  splitmix64 / xoshiro256++ family of its own, not numpy's). An EMCCD's gain register and
+  by ``(seed + t, detector_key(name), f)``: the three words are this module's, the
+  generators' seeding from them (:func:`luckyao.lucky.noise_streams.stream_key`) is part of the
+  compiled generators, as ``SeedSequence`` is of numpy's (a splitmix64 / xoshiro256++
+  family of its own). An EMCCD's gain register and
   input-referred read noise of that frame: ``default_rng([seed + t, EMCCD_STREAM,
   detector_key(name), f])`` (:func:`emccd_rng`).
 """
@@ -21,16 +25,25 @@ WFS_NOISE_STREAM = 0xFFFF_FFFF
 """Second entropy word of the WFS-noise stream: above any layer index of the screens."""
 
 
+CALIBRATION_STREAM = 1000
+"""Second entropy word of the WFS calibration's stream: above any layer index of the screens."""
+
+
 def screen_rng(seed: int, layer: int) -> np.random.Generator:
     """The generator of layer ``layer``'s phase screen."""
-    if not 0 <= layer < WFS_NOISE_STREAM:
-        raise ValueError(f"layer index {layer} out of [0, {WFS_NOISE_STREAM})")
+    if not 0 <= layer < CALIBRATION_STREAM:
+        raise ValueError(f"layer index {layer} out of [0, {CALIBRATION_STREAM})")
     return np.random.default_rng([seed, layer])
 
 
 def wfs_noise_rng(seed: int) -> np.random.Generator:
     """The generator of the LGS wavefront sensors' photon and read noise."""
     return np.random.default_rng([seed, WFS_NOISE_STREAM])
+
+
+def calibration_rng(seed: int) -> np.random.Generator:
+    """The generator of the WFS calibration's turbulence draws."""
+    return np.random.default_rng([seed, CALIBRATION_STREAM])
 
 
 EMCCD_STREAM = 0xFFFF_FFFE

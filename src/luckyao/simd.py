@@ -1,6 +1,13 @@
 """LLVM IR helpers for numba intrinsics that work on ``LANES`` float32 at once, and two such
 intrinsics: :func:`fmuladd` (also of float64), :func:`transpose`.
 
+Speed-only machinery: nothing here models anything, and no number depends on it being used.
+It stands for plain numba code: ``values[index[k]]`` read in a loop (a gather), ``a * b + c``
+with numba's ``contract`` fast-math flag (:func:`fmuladd`), a loop copying ``values[starts[r]
++ x]`` to ``out[x, r]`` (:func:`transpose`); each gives the bits of that plain code. The
+intrinsics built on it: ``optics/taps.py``, ``lucky/stream_vectors.py``; the WFS kernels'
+transposes (``wfs/kernels.py``).
+
 Numba's LLVM leaves a loop scalar when its loads are indexed
 (``values[index[k]]``: it cannot bound them for its run-time alias checks),
 and it fuses a multiply into an add only where the product has no other use.

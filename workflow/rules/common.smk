@@ -19,6 +19,7 @@ from luckyao.studyspec.resolved import imaged_targets
 from luckyao.studyspec.schema import ConfigError
 from luckyao.studyspec.study import plausibility_warnings, unused_cases
 from luckyao.studyspec.sweeps import sweep_points
+from luckyao.threads import shell_prefix
 
 RUN_LOCK = hold_shared()  # this study folder is in use until this Snakemake exits (run.sh cleans up only when free)
 
@@ -59,8 +60,8 @@ calibration and memory estimate serve the product: they share its LGS chain)."""
 for _name, _spec in SLOPES.items():
     if _spec is not None:
         SLOPES_CASES.setdefault(slopes_key(_spec), []).append(_name)
-LUCKYAO = ("OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1 NUMBA_NUM_THREADS=1 "
-           f"{shlex.quote(sys.executable)} -m luckyao")  # every value formatted into a command is quoted (:q)
+# every job on one thread (src/luckyao/threads.py); every value formatted into a command is quoted (:q)
+LUCKYAO = f"{shell_prefix()}{shlex.quote(sys.executable)} -m luckyao"
 
 
 def reconstructor_file(case):

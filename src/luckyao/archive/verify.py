@@ -42,7 +42,7 @@ import xarray as xr
 
 from .create import (CASE_FILES, CHECKSUMS, FORMAT, REPO, REQUIRED, ArchiveError, case_jobs, package_differences,
                      parse_lock, runtime_packages)
-from ..studyspec.resolved import frame_count
+from ..clock import FrameClock
 from ..studyspec.study import validate_study
 from ..studyspec.yamlfile import read_config_text
 from ..io.datasets import code_version
@@ -202,7 +202,7 @@ def cheapest_case(names, held: dict[str, bytes], study: dict, cases: dict) -> tu
 
     def work(c):
         config = cases[c]
-        return (frame_count(config) * round(config["camera"]["frame_time_s"] / config["time_step_s"]),
+        return (FrameClock.from_config(config).n_steps,
                 len(config["targets_arcsec"]), config["lgs"]["enabled"], config["ao"]["mode"] != "none",
                 config["wfs"]["n_subapertures"], config["camera"]["n_pixels"], c)
     return min(archived, key=work), None

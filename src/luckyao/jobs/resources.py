@@ -34,13 +34,14 @@ import os
 import shutil
 from pathlib import Path
 
+from ..clock import FrameClock, frame_count
 from ..steps.screens import TurbulenceSpec, strip_specs
 from ..studyspec.schema import ConfigError
 from ..studyspec.study import validate_study
 from ..studyspec.sweeps import expand_sweeps
 from ..studyspec.products import (commands_key, commands_spec, reconstructor_key, reconstructor_spec, slopes_key,
                              slopes_spec, turbulence_key, turbulence_spec)
-from ..studyspec.resolved import frame_count, imaged_targets
+from ..studyspec.resolved import imaged_targets
 from ..studyspec.lucky import lucky_settings, registrations
 
 BASE_BYTES = 0.4e9
@@ -108,8 +109,7 @@ def commands_memory_bytes(spec: dict) -> float:
 def slopes_bytes(case: dict) -> float:
     """An AO case's LGS slopes product (float32, every WFS exposure's slopes)."""
     n_slopes, _ = _slopes_and_points(case)
-    steps_per_frame = round(case["camera"]["frame_time_s"] / case["time_step_s"])
-    return 4.0 * n_slopes * frame_count(case) * steps_per_frame / case["wfs"]["exposure_steps"]
+    return 4.0 * n_slopes * FrameClock.from_config(case).n_exposures
 
 
 def slopes_memory_bytes(case: dict) -> float:

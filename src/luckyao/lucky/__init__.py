@@ -1,6 +1,7 @@
 """Lucky imaging of a frame cube: detector noise, image metrics, ranking, recentred
-accumulation and scoring, driven by :func:`run_lucky` (module ``pipeline``); ``kernels``
-holds the compiled noise, encircled-energy and accumulation loops."""
+accumulation and scoring, driven by :func:`run_lucky` (module ``pipeline``); the compiled loops:
+``noise_streams`` (keyed random streams, detector noise), ``radial_sums`` (encircled energy),
+``adds`` (the partial sums), ``image_helpers`` (crops, shifts, the FWHM's region)."""
 
 from ..exports import lazy_exports
 

@@ -12,7 +12,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from . import kernels
+from . import adds
 from .metrics import EncircledEnergy, score_images
 from .ranking import criterion_bins, fraction_counts, last_bins
 
@@ -186,7 +186,7 @@ class PartialSums:
 
 class WholeFrames:
     """The baseline's accumulation (``cog``): each frame added whole (n x n), rolled by its
-    whole-pixel shift (:func:`.kernels.add_recentred`); its integrated images scored whole
+    whole-pixel shift (:func:`.adds.add_recentred`); its integrated images scored whole
     (:func:`.metrics.score_images`). The same interface as :class:`.cropped.CroppedFrames`."""
 
     def __init__(self, n_pixels: int, encircled: EncircledEnergy, diffraction_limited_peak: float,
@@ -202,7 +202,7 @@ class WholeFrames:
 
     @staticmethod
     def add(prepared: np.ndarray, shifts: np.ndarray, rows: np.ndarray, partial: np.ndarray, sign: float) -> None:
-        kernels.add_recentred(prepared, shifts, rows, partial, sign)
+        adds.add_recentred(prepared, shifts, rows, partial, sign)
 
     def window_values(self, prepared: np.ndarray, shifts: np.ndarray, out: np.ndarray) -> None:
         window_values(prepared, shifts, self.window, out)

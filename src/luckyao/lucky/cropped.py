@@ -35,7 +35,7 @@ from functools import cached_property
 
 import numpy as np
 
-from . import kernels
+from . import adds, image_helpers
 from .accumulation import axis_window
 from .metrics import EncircledEnergy, d50_from_radius, fwhm_arcsec, strehl_from
 from .registration import fourier_shift
@@ -95,7 +95,7 @@ class CroppedFrames:
             return out
         picked = slice(None) if which.all() else np.flatnonzero(which)  # a slice: no copies
         crops = np.empty((k, c, c), np.float32)
-        kernels.crop_rolled(frames, shifts, which, crops)
+        image_helpers.crop_rolled(frames, shifts, which, crops)
         moving = which & np.any(remainder != 0, axis=1)
         if moving.all():
             crops = fourier_shift(crops, remainder)
@@ -120,7 +120,7 @@ class CroppedFrames:
     def add(prepared: np.ndarray, shifts: np.ndarray, rows: np.ndarray, partial: np.ndarray, sign: float) -> None:
         """``partial[r] += sign prepared[j]`` for every row ``r = rows[j, c] >= 0`` (the shifts are in
         the vectors already)."""
-        kernels.add_rows(prepared, rows, partial, sign)
+        adds.add_rows(prepared, rows, partial, sign)
 
     def window_values(self, prepared: np.ndarray, shifts: np.ndarray, out: np.ndarray) -> None:
         """The registered frames' values ``out`` (k, w) at the crop's pixels :attr:`window`."""

@@ -16,7 +16,7 @@ pixel reads 1 above the threshold and 0 below (photon counting; coincidence loss
 ~0.1 photon per pixel per frame).
 
 The model is sampled by :class:`KeyedNoise`, from compiled streams keyed per frame by
-(seed, detector name, frame index) (:mod:`luckyao.lucky.kernels`); the tests hold a plain
+(seed, detector name, frame index) (:mod:`luckyao.lucky.noise_streams`); the tests hold a plain
 numpy sampler of the same model as its reference.
 """
 
@@ -25,7 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..seeds import detector_key, emccd_rng
-from . import kernels
+from . import noise_streams
 
 
 @dataclass(frozen=True)
@@ -69,7 +69,7 @@ class KeyedNoise:
     """Detector noise of frame chunks with one random stream per (seed, detector, frame).
 
     A pixel reads ``Poisson(N I) + sigma Normal(0, 1)`` (negative unit-flux values as 0),
-    drawn by :func:`luckyao.lucky.kernels.detect_frames`: frame ``f``'s draws are keyed by
+    drawn by :func:`luckyao.lucky.noise_streams.detect_frames`: frame ``f``'s draws are keyed by
     ``(seed, detector_key(name), f)`` only, so they do not depend on the chunking, the other
     frames or the other detectors, and drawing a chunk again gives the same frames.
     :meth:`prepare` a chunk once (its cumulative sums, shared by all detectors): it returns the
@@ -81,7 +81,7 @@ class KeyedNoise:
         self.n_pixels, self.max_frames = n, max_frames
         self._within = np.empty((max_frames, n, n))
         self._rows_cumulative = np.empty((max_frames, n))
-        self._bits = np.empty(n * n // 2 + kernels.LANES * 4, np.uint64)[: n * n // 2]
+        self._bits = np.empty(n * n // 2 + noise_streams.LANES * 4, np.uint64)[: n * n // 2]
         self._normals = np.empty(n * n, np.float32)
         self._prepared = 0  # chunks prepared so far: only the last one's sums are held
 
@@ -92,7 +92,7 @@ class KeyedNoise:
         if n * n % 64 or k > len(self._within) or n != self.n_pixels:
             raise ValueError(f"chunk {unit.shape}: n^2 must be a multiple of 64, frames {self.n_pixels} square, "
                              f"at most {len(self._within)} of them")
-        kernels.cumulative(unit, self._within[:k], self._rows_cumulative[:k])
+        noise_streams.cumulative(unit, self._within[:k], self._rows_cumulative[:k])
         self._prepared += 1
         return PreparedChunk(self, unit, self._prepared)
 
@@ -122,14 +122,14 @@ class PreparedChunk:
         rows, cols, peak = np.empty((k, n)), np.empty((k, n)), np.empty(k, np.float32)
         drawn = np.ones(k, np.bool_) if drawn is None else np.asarray(drawn, np.bool_)
         em = detector.electron_multiplying
-        kernels.detect_frames(unit, noise._within[:k], noise._rows_cumulative[:k],
+        noise_streams.detect_frames(unit, noise._within[:k], noise._rows_cumulative[:k],
                               float(detector.photons_per_frame), np.float32(0.0 if em else detector.read_noise_e),
                               seed, detector_key(detector.name), first_frame, drawn, out, rows, cols, peak,
                               noise._bits, noise._normals)
         if em:
             for j in np.flatnonzero(drawn):
                 out[j] = gain_register(out[j], detector, emccd_rng(seed, detector_key(detector.name), first_frame + j))
-                kernels.frame_sums(out[j:j + 1], rows[j:j + 1], cols[j:j + 1], peak[j:j + 1])
+                noise_streams.frame_sums(out[j:j + 1], rows[j:j + 1], cols[j:j + 1], peak[j:j + 1])
         return out, rows, cols, peak
 
 

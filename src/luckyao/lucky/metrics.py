@@ -22,7 +22,8 @@ import pyfftw
 import scipy.fft
 import scipy.special
 
-from .kernels import component, dilate, dirichlet, first_crossing, radial_energies, radial_energy
+from .image_helpers import component, dilate, dirichlet
+from .radial_sums import first_crossing, radial_energies, radial_energy
 
 
 def centroid_px(images: np.ndarray) -> np.ndarray:
@@ -236,7 +237,7 @@ class EncircledEnergy:
         """The radial sums (k, m, n_bins) of :meth:`energies_binned` (its terms of equal ``|f|``,
         before their product with the kernel: :meth:`energies_of`) of images (k, n, n) about several
         centres each, ``centres_px`` (k, m, 2), each image's spectrum (from ``spectra`` if given)
-        read once for its ``m`` centres (:func:`luckyao.lucky.kernels.radial_energies`: the same
+        read once for its ``m`` centres (:func:`luckyao.lucky.radial_sums.radial_energies`: the same
         sums to ~1e-14); ``which`` (indices): only those images, (len(which), m, n_bins). Linear in
         the image, as the energies: a sum of images has the sum of their radial sums."""
         fy, fx, row_end, bin_of, weight, _ = self._radial
@@ -297,7 +298,7 @@ class EncircledEnergy:
 
 def _first_crossing(radii: np.ndarray, values: np.ndarray, level: float) -> np.ndarray:
     """Radius of the first crossing of ``level`` by ``values`` (..., n_r) sampled on ``radii``
-    (:func:`luckyao.lucky.kernels.first_crossing`)."""
+    (:func:`luckyao.lucky.radial_sums.first_crossing`)."""
     v = np.ascontiguousarray(values, dtype=np.float64).reshape(-1, values.shape[-1])
     out = np.empty(len(v))
     first_crossing(np.ascontiguousarray(radii, dtype=np.float64), v, float(level), out)
@@ -335,7 +336,7 @@ def _dirichlet(j: np.ndarray, up: int, n: int) -> np.ndarray:
     is ``sin(pi t) cot(pi t / n)`` (even n) or ``sin(pi t) / sin(pi t / n)`` (odd n) and
     whose imaginary part ``-sin(pi t)`` (even n) is rank one. ``sin(pi t) = (-1)^y'
     sin(pi y_p)``, exactly 0 on whole pixels, where ``D`` is n on ``y' = y_p mod n``
-    (:func:`luckyao.lucky.kernels.dirichlet`, from a table of the other factor)."""
+    (:func:`luckyao.lucky.image_helpers.dirichlet`, from a table of the other factor)."""
     out = np.empty((len(j), n))
     dirichlet(np.asarray(j, dtype=np.int64), int(up), _dirichlet_table(int(up), int(n)), out)
     return out

@@ -47,7 +47,7 @@ The passes over the frames, in order (:class:`_LuckyRun`):
 Alongside, the noiseless frames (the input, as float32) get the same detector's shifts
 and the same bins into a second set of partial sums: the ``*_noiseless`` scores separate a
 wrong selection or recentring from the noise in the final image. The sums are float64
-throughout, frame by frame (:func:`.kernels.add_recentred`); a noiseless detector's second
+throughout, frame by frame (:func:`.adds.add_recentred`); a noiseless detector's second
 set is its first, copied, so its ``*_noiseless`` values equal the others bit for bit. The
 sub-pixel methods add, instead of whole frames, each registered frame's central crop, its
 encircled energy's radial sums about the axis and its flux (:mod:`.cropped`: an eighth of the
@@ -77,7 +77,7 @@ import xarray as xr
 
 from ..progress import Progress, log
 from ..seeds import detector_key
-from . import kernels
+from . import adds
 from .detector import Detector, KeyedNoise
 from .method_run import MethodRun
 from .metrics import EncircledEnergy, centroid_from_sums, strehl_from
@@ -312,7 +312,7 @@ class _LuckyRun:
                     spectra = spectra_unit
                     common = self.common_measures(spectra, *frame_sums(unit))
                     measures = self.measures(spectra, common)
-                kernels.add_frames(spectra.frames, self.long_none[i])
+                adds.add_frames(spectra.frames, self.long_none[i])
                 for method, measured in zip(self.methods, measures):
                     method.add_detected(i, detector, sl, spectra, measured)
             for method in self.methods:

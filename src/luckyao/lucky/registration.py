@@ -43,7 +43,7 @@ import numpy as np
 import pyfftw
 import scipy.fft
 
-from . import kernels
+from . import image_helpers
 from .accumulation import recentring_shifts_px
 
 REGISTRATIONS = ("cog", "windowed_cog", "peak", "xcorr")
@@ -226,7 +226,7 @@ def fourier_shift(frames: np.ndarray, shifts_px: np.ndarray) -> np.ndarray:
     """Frames (k, n, n) float32 shifted by ``shifts_px`` (k, 2) (y, x) [pixel], periodic:
     ``out(r) = frame(r - s)`` for the band-limited frame, by the phase ramp
     ``exp(-2 pi i k.s / n)`` on its real FFT (FFTW, float32, :data:`FOURIER_SHIFT_BATCH` frames at a
-    time; the ramp :func:`.kernels.phase_ramps`; the Nyquist terms made real by the inverse
+    time; the ramp :func:`.image_helpers.phase_ramps`; the Nyquist terms made real by the inverse
     transform). Conserves the flux (the zero frequency is untouched); a whole-pixel shift equals
     ``np.roll`` to float rounding."""
     frames = np.asarray(frames, dtype=np.float32)
@@ -238,7 +238,7 @@ def fourier_shift(frames: np.ndarray, shifts_px: np.ndarray) -> np.ndarray:
         batch = _batch_transforms(1 << (m - 1).bit_length(), n)  # the other frames of the batch: ignored
         batch.frames[:m] = frames[start:start + m]
         batch.forward()
-        kernels.phase_ramps(batch.spectra[:m], shifts_px[start:start + m])
+        image_helpers.phase_ramps(batch.spectra[:m], shifts_px[start:start + m])
         batch.backward()  # normalised by FFTW's interface (1 / n^2)
         out[start:start + m] = batch.frames[:m]
     return out

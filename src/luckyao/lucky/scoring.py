@@ -11,16 +11,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import kernels
+from . import noise_streams
 from .metrics import relative_to_diffraction_limit, strehl_from
 
 
 def frame_sums(frames: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Row and column sums (k, n) float64 and peaks (k,) float32 of frames (k, n, n) float32
-    (:func:`luckyao.lucky.kernels.frame_sums`; the noisy frames get them from their detection)."""
+    (:func:`luckyao.lucky.noise_streams.frame_sums`; the noisy frames get them from their detection)."""
     k, n = frames.shape[:2]
     rows, cols, peak = np.empty((k, n)), np.empty((k, n)), np.empty(k, np.float32)
-    kernels.frame_sums(frames, rows, cols, peak)
+    noise_streams.frame_sums(frames, rows, cols, peak)
     return rows, cols, peak
 
 

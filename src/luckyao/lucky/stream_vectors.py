@@ -1,6 +1,11 @@
-"""Vector intrinsics of the detector-noise streams (:mod:`luckyao.lucky.kernels`): the LANES
+"""Vector intrinsics of the detector-noise streams (:mod:`luckyao.lucky.noise_streams`): the LANES
 interleaved xoshiro256++ generators stepped as one vector, and the ziggurat's rectangle test of
 16 deviates at once.
+
+Speed-only machinery (numba intrinsics on :mod:`luckyao.simd`): it stands for two plain loops,
+each generator stepped in turn (``noise_streams._xoshiro``) and each deviate's test ``m <
+k[layer]`` with ``x = m w[layer]`` one at a time, and gives their bits; the streams and the
+noise model are in ``lucky/noise_streams.py``.
 
 Numba's LLVM leaves both loops scalar: the generators' states live in arrays that the output might
 alias (each step loads and stores them), and the ziggurat reads its tables at indices drawn from
@@ -19,7 +24,7 @@ from numba.extending import intrinsic
 from .. import simd
 
 GENERATORS = 8
-"""Interleaved xoshiro256++ generators: one vector of 8 uint64 (``kernels.LANES``)."""
+"""Interleaved xoshiro256++ generators: one vector of 8 uint64 (``noise_streams.LANES``)."""
 
 DEVIATES = simd.LANES
 """Deviates of one rectangle test (:func:`ziggurat_rectangle`): 16 int32 words."""

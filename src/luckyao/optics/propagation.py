@@ -22,7 +22,7 @@ from .taps import column_taps, row_taps
 
 # numba's disk cache keys a kernel by its own file: this digest of the intrinsics the kernels
 # inline makes an edit of theirs recompile them (tests/test_simd.py keeps it current)
-# intrinsics digest (optics/taps.py, simd.py): 70fa3438f8a0ce9c
+# intrinsics digest (optics/taps.py, simd.py): 5fdfd1bedc13edf2
 
 _U = numba.uint64  # unsigned indices: numba emits no negative-index wraparound code
 

@@ -1,5 +1,10 @@
 """The minor-axis taps of :func:`luckyao.optics.propagation._sample_kernel`, ``LANES`` grid points at once.
 
+Speed-only machinery (numba intrinsics on :mod:`luckyao.simd`): it stands for the plain loop
+over a line's grid points, ``grid[p] += v[t[p]] + c[p] (v[t[p] + 1] - v[t[p]])`` (the
+association below), and gives its bits; the physics of the propagation is in
+``optics/propagation.py``.
+
 A grid point on line ``a`` at minor tap ``t`` with weight ``c`` adds the
 interpolation of ``v = between_a`` (the line's major-axis interpolation) to
 its value ``g``: ``g + (v[t] + c (v[t + 1] - v[t]))`` where both lines of its

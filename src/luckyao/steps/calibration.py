@@ -11,9 +11,9 @@
 import logging
 import time
 
-import numpy as np
 import xarray as xr
 
+from ..seeds import calibration_rng
 from ..wfs.calibration import SlopeResponse, measure_response, reference_spot_spectra
 from ..wfs.centroiders import SlopeEstimator, make_centroider
 from ..wfs.shack_hartmann import ShackHartmann, lgs_elongation_otf
@@ -39,7 +39,7 @@ def build_calibration(spec: dict) -> xr.Dataset:
     centroider = case_centroider(settings, wfs, elongation, seeing)
     start = time.perf_counter()
     response = measure_response(wfs, elongation, seeing, centroider, min(lgs.n_beacons, 4), settings.calibration_draws,
-                                np.random.default_rng([spec["seed"], 1000]))
+                                calibration_rng(spec["seed"]))
     seconds = time.perf_counter() - start
     log.info("%d sub-apertures, %s: mean gains x %.3f, y %.3f (+- %.3f) in %.1f s", wfs.n_valid, settings.centroider,
              response.matrix[0, 0].mean(), response.matrix[1, 1].mean(), response.matrix_error[0, 0].mean(), seconds)

@@ -40,19 +40,19 @@ def measure_lgs_slopes(spec: dict, screens: ScreenSet, calibration: xr.Dataset |
     of the case's frames, each frame's layer scales taken as the time loop takes them."""
     case = Case.from_config(spec["case"])
     sensor = lgs_sensor(case, screens, spec["seed"], calibration)
-    spf, e = case.steps_per_frame, sensor.exposure_steps
+    clock = case.clock
+    e = clock.exposure_steps
     slopes = None
     progress = Progress("frames", case.n_frames)
     for frame in range(case.n_frames):
-        steps = frame * spf + np.arange(spf)
+        steps = clock.steps(frame)
         layer_scales = case.layer_scales(steps)
-        for i in range(0, spf, e):
+        for i in clock.exposure_offsets():
             exposure = sensor.exposure_slopes(steps[i:i + e], layer_scales[i:i + e])
             if slopes is None:
-                slopes = np.empty((case.n_frames * spf // e,) + exposure.shape, exposure.dtype)
-            slopes[(frame * spf + i) // e] = exposure
-        require_finite(slopes[frame * spf // e:(frame + 1) * spf // e], f"LGS slopes of frame {frame}", "slopes",
-                       SLOPE_DIMS)
+                slopes = np.empty((clock.n_exposures,) + exposure.shape, exposure.dtype)
+            slopes[clock.exposure(steps[i])] = exposure
+        require_finite(slopes[clock.frame_exposures(frame)], f"LGS slopes of frame {frame}", "slopes", SLOPE_DIMS)
         progress.update(frame + 1)
     return xr.Dataset(
         {"slopes_rad": (SLOPE_DIMS, slopes, {

@@ -152,15 +152,18 @@ def simulate(case: Case, screens: ScreenSet, write_frames, sensor: LgsSensor | N
     is the long-exposure Strehl (no recentring): a plain mean, so its
     Monte-Carlo error follows from batch means.
     """
-    n_targets, n_frames, spf = len(case.targets), case.n_frames, case.steps_per_frame
+    n_targets, n_frames, spf, clock = len(case.targets), case.n_frames, case.steps_per_frame, case.clock
+    if sensor is not None and sensor.exposure_steps != clock.exposure_steps:
+        raise ValueError(f"the LGS sensor's exposures are {sensor.exposure_steps} steps, the case's "
+                         f"{clock.exposure_steps}")
     imaged = list(range(n_targets)) if imaged_targets is None else sorted(imaged_targets)
     science = SciencePath(case, screens, range(n_targets), imaged)
     imager = science.imager
     correction = apodisation = None
     if commands is not None:
-        correction = OpenLoopCorrection(*commands, science.dm_surface(), sensor.exposure_steps,
+        correction = OpenLoopCorrection(*commands, science.dm_surface(), clock.exposure_steps,
                                         case.ao.delay_steps, spf)
-        dm_commands = np.empty((n_frames * spf // sensor.exposure_steps, correction.dm.n_actuators), np.float32)
+        dm_commands = np.empty((clock.n_exposures, correction.dm.n_actuators), np.float32)
         apodisation = science.apodisation(correction.dm)
         if apodisation is not None and apodisation.point_labels is not None:  # LGS driver
             points = science.reconstruction_points()
@@ -169,8 +172,8 @@ def simulate(case: Case, screens: ScreenSet, write_frames, sensor: LgsSensor | N
     steps_max = science.propagator.n_steps_max
     if sensor is not None:
         steps_max = min(steps_max, sensor.n_steps_max)
-    if n_frames * spf > steps_max:
-        raise ValueError(f"the screens hold {steps_max} steps, the case needs {n_frames * spf}")
+    if clock.n_steps > steps_max:
+        raise ValueError(f"the screens hold {steps_max} steps, the case needs {clock.n_steps}")
     n_pix = case.camera.n_pixels
 
     true_rms_nm = np.empty((n_targets, n_frames), dtype=np.float32)
@@ -191,22 +194,22 @@ def simulate(case: Case, screens: ScreenSet, write_frames, sensor: LgsSensor | N
         count = min(block_frames, n_frames - start)
         for j in range(count):
             frame = start + j
-            steps = frame * spf + np.arange(spf)
+            steps = clock.steps(frame)
             layer_scales = case.layer_scales(steps)
-            if sensor is not None:  # LGS sensor -> estimator (-> correction); spf is a multiple of exposure_steps
-                e = sensor.exposure_steps
-                starts = steps[::e]
+            if sensor is not None:  # LGS sensor -> estimator (-> correction); a frame holds whole exposures
+                e = clock.exposure_steps
+                starts = clock.exposure_starts(steps)
                 slopes = np.stack([sensor.exposure_slopes(steps[i:i + e], layer_scales[i:i + e])
-                                   for i in range(0, spf, e)])
+                                   for i in clock.exposure_offsets()])
                 require_finite(slopes, f"LGS slopes of frame {frame}", "slopes",
                                ("exposure", "beacon", "axis", "subaperture"))
                 lgs_rms[:, frame] = lucky_frame_rms_nm(estimator.rms_nm(slopes))
                 if correction is not None:
                     for start_step, exposure in zip(starts, slopes):
-                        dm_commands[start_step // e] = correction.measure(int(start_step), exposure)
+                        dm_commands[clock.exposure(start_step)] = correction.measure(int(start_step), exposure)
                         if apodisation is not None and apodisation.point_labels is not None:
                             apodisation.from_estimate(int(start_step), estimator.reconstructors[0] @ exposure.ravel(),
-                                                      dm_at_points @ dm_commands[start_step // e])
+                                                      dm_at_points @ dm_commands[clock.exposure(start_step)])
                     residual = np.stack([correction.residual_slopes(int(s), exposure)
                                          for s, exposure in zip(starts, slopes)])
                     lgs_residual_rms[:, frame] = lucky_frame_rms_nm(estimator.rms_nm(residual))
@@ -263,6 +266,36 @@ def simulate(case: Case, screens: ScreenSet, write_frames, sensor: LgsSensor | N
     )
 
 
+class TimeLoop:
+    """A case's time loop composed from its products: the one composition, which the workflow's
+    ``simulate`` step (so :func:`luckyao.run_case`, which runs that step) and the benchmarks use.
+
+    The LGS chain: ``slopes`` (an AO case's recorded slopes, :class:`.lgs_slopes.RecordedSlopes`)
+    replayed, or else, with ``reconstructors`` (target, point, slope), the case's sensor measured
+    in the loop with ``seed`` and the WFS ``calibration`` (:func:`lgs_chain`); its estimator from
+    ``reconstructors``. Without either, none: a no-AO case may be given its twin's ``lgs_rms_nm``
+    (target, frame) (:func:`twin_lgs_rms_nm`). ``commands`` (the command matrix and the DM
+    slopes) with AO; ``imaged_targets`` as :func:`simulate`'s. Built here (the sensor's set-up
+    takes seconds, which a benchmark leaves out of its timing); :meth:`run` runs it once.
+    """
+
+    def __init__(self, case: Case, screens: ScreenSet, seed: int, *, reconstructors: np.ndarray | None = None,
+                 calibration=None, slopes=None, commands: tuple[np.ndarray, np.ndarray] | None = None,
+                 lgs_rms_nm: np.ndarray | None = None, imaged_targets=None):
+        self.case, self.screens, self.commands = case, screens, commands
+        self.lgs_rms_nm, self.imaged_targets = lgs_rms_nm, imaged_targets
+        self.sensor = self.estimator = None
+        if slopes is not None:
+            self.sensor, self.estimator = slopes, LgsRmsEstimator(reconstructors, slopes.n_slopes)
+        elif reconstructors is not None:
+            self.sensor, self.estimator = lgs_chain(case, screens, reconstructors, seed, calibration)
+
+    def run(self, write_frames) -> xr.Dataset:
+        """:func:`simulate` of the case (``write_frames`` as there): its telemetry."""
+        return simulate(self.case, self.screens, write_frames, self.sensor, self.estimator, self.commands,
+                        self.imaged_targets, lgs_rms_nm=self.lgs_rms_nm)
+
+
 class Replay:
     """The science path of some of a case's targets replayed frame by frame, corrected by the
     recorded DM commands: called, an iterator of ``(start, frames (target, k, n, n))``, and the
@@ -284,19 +317,19 @@ class Replay:
         if case.ao.apodisation is not None:
             raise ValueError("replaying an adaptively apodised case (ao.apodisation) is not supported: image all "
                              "its targets in the simulation")
-        spf, exposure_steps = case.steps_per_frame, case.wfs.exposure_steps
+        clock = case.clock
         science = SciencePath(case, self.screens, self.targets, range(len(self.targets)))
         dm = None
         if self.dm_commands_m is not None:
-            dm = DelayedDm(science.dm_surface(), exposure_steps, case.ao.delay_steps, spf)
+            dm = DelayedDm(science.dm_surface(), clock.exposure_steps, case.ao.delay_steps, clock.steps_per_frame)
         block = np.empty((len(self.targets), self.block_frames) + (case.camera.n_pixels,) * 2, dtype=np.float32)
         for start in range(0, case.n_frames, self.block_frames):
             count = min(self.block_frames, case.n_frames - start)
             for j in range(count):
-                steps = (start + j) * spf + np.arange(spf)
+                steps = clock.steps(start + j)
                 if dm is not None:
-                    for step in steps[::exposure_steps]:
-                        dm.apply(int(step), self.dm_commands_m[step // exposure_steps])
+                    for step in clock.exposure_starts(steps):
+                        dm.apply(int(step), self.dm_commands_m[clock.exposure(step)])
                 block[:, j], self.axis_strehl[:, start + j], _ = science.frame(
                     start + j, steps, case.layer_scales(steps), dm, truth=False)
             yield start, block[:, :count].copy()

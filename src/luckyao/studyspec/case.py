@@ -21,8 +21,8 @@ from ..units import ARCSEC_RAD
 from ..wfs.beacons import LgsConfig
 from ..wfs.calibration import BeaconSeeing
 from ..wfs.shack_hartmann import ShackHartmann
+from ..clock import FrameClock, frame_count, steps_per_frame
 from .schema import case_defaults
-from .resolved import frame_count
 
 
 @dataclass(frozen=True)
@@ -160,7 +160,7 @@ class Case:
             outer_scale_m=atm["outer_scale_m"],
             targets=targets_from(case.get("targets_arcsec", ())),
             time_step_s=case["time_step_s"],
-            steps_per_frame=round(cam["frame_time_s"] / case["time_step_s"]),
+            steps_per_frame=steps_per_frame(case),
             n_frames=frame_count(case),
             lgs=lgs_from(case["lgs"]) if case["lgs"]["enabled"] else None,
             wfs=wfs_from(case["wfs"]),
@@ -177,7 +177,12 @@ class Case:
 
     def r0_samples_m(self) -> np.ndarray:
         """r0 at 500 nm [m] at every time step of the case."""
-        return self.r0.r0_m(np.arange(self.n_frames * self.steps_per_frame) * self.time_step_s)
+        return self.r0.r0_m(np.arange(self.clock.n_steps) * self.time_step_s)
+
+    @property
+    def clock(self) -> FrameClock:
+        """The case's frames, time steps and WFS exposures (:mod:`luckyao.clock`)."""
+        return FrameClock(self.steps_per_frame, self.wfs.exposure_steps, self.n_frames)
 
     def shack_hartmann(self) -> ShackHartmann:
         """The LGS WFS (the case must have LGS)."""

@@ -1,11 +1,5 @@
-"""Questions asked of a resolved case config: its frames, the targets its simulation
-images, the selection criteria it can give."""
-
-import numpy as np
-
-def frame_count(case: dict) -> int:
-    """Whole lucky frames in a resolved case's duration."""
-    return int(np.floor(case["duration_s"] / case["camera"]["frame_time_s"] + 1e-9))
+"""Questions asked of a resolved case config: the targets its simulation images, the
+selection criteria it can give (its frames: :mod:`luckyao.clock`)."""
 
 
 def imaged_targets(case: dict) -> list[int]:

@@ -5,8 +5,9 @@ checked against the schema (``schema.yaml``) and a few cross-key rules before an
 the first problem of each case and figure is reported as a ``ConfigError`` naming the key.
 """
 
+from ..clock import frame_count
 from .lucky import MAX_SWEEP_DETECTORS, SIGNAL_KINDS, error_blocks, sweep_detector_list
-from .resolved import criteria_of, frame_count
+from .resolved import criteria_of
 from .scaling import derive_size_defaults
 from .schema import ConfigError, check_finite, deep_merge, load_schema, validate_keys
 from .sweeps import expand_sweeps

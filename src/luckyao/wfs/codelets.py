@@ -1,5 +1,11 @@
 """Straight-line DFT codelets, generated symbolically, for numba kernels.
 
+Speed-only machinery: the generated statements stand for plain FFTs and sums, those of the
+step-by-step model in ``wfs/shack_hartmann.py`` (``intensity_samples``: the FFT of each
+sub-aperture's zero-padded field; ``intensity_spectra``; ``pixel_images``: the pixel sums),
+computed with fewer operations (zero inputs and trivial twiddles pruned) for the compiled
+exposure (``wfs/kernels.py``); the WFS physics is in the model.
+
 A :class:`Codelet` records float32 statements of one SIMD lane: values are
 terms ``(name, sign)`` or ``None`` (an exact zero), complex values pairs of
 terms, so that multiplications by 0, +-1 and +-i cost nothing and zero inputs

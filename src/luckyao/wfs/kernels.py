@@ -38,7 +38,7 @@ from .codelets import Codelet, dft, load_module, term_value
 
 # numba's disk cache keys a kernel by its own file: this digest of the intrinsics the kernels
 # inline makes an edit of theirs recompile them (tests/test_simd.py keeps it current)
-# intrinsics digest (simd.py): 53743260a0750b75
+# intrinsics digest (simd.py): 1bbca53bd66fda7d
 
 _U = numba.uint64  # unsigned offsets keep the lane loops vectorisable
 _FASTMATH = {"contract"}  # fused multiply-adds; no reassociation
