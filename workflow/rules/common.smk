@@ -6,7 +6,7 @@ import sys
 
 from luckyao.study.code_deps import step_sources
 from luckyao.study.datasets import atomic_path
-from luckyao.study.live_run import hold_shared
+from luckyao.study.live_run import STUDY_JOB, hold_shared
 from luckyao.study.resources import (commands_memory_bytes, lucky_memory_bytes, machine_memory_bytes, mem_mb,
                                      preflight, reconstructor_memory_bytes, simulate_memory_bytes,
                                      slopes_memory_bytes, turbulence_memory_bytes)
@@ -55,8 +55,10 @@ calibration and memory estimate serve the product: they share its LGS chain)."""
 for _name, _spec in SLOPES.items():
     if _spec is not None:
         SLOPES_CASES.setdefault(slopes_key(_spec), []).append(_name)
-LUCKYAO = ("OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1 NUMBA_NUM_THREADS=1 "
+LUCKYAO = (f"{STUDY_JOB}=1 OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1 NUMBA_NUM_THREADS=1 "
            f"{shlex.quote(sys.executable)} -m luckyao")  # every value formatted into a command is quoted (:q)
+"""Every job's command: a job of the workflow (``STUDY_JOB``: it holds the study's run lock while
+it lives and may set a bad input of the study aside), its numerical libraries on one thread."""
 
 
 def reconstructor_file(case):

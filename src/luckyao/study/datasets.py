@@ -3,10 +3,14 @@
 Every file is written under a temporary name and renamed when complete, so a
 file with the final name is never half-written; a failed write names the file
 and what limits it (free disk, file size limit). A study file read by a job
-that is unreadable or holds NaN where it may not is set aside as
-``<name>.bad`` (``set_aside``), with an error naming it: the next run remakes
-it with the job that made it. Conventions: CF-1.8 style, ``units`` and
-``long_name`` on every variable; provenance in global attributes.
+of the workflow that is unreadable or holds NaN where it may not is set aside
+as ``<name>.bad`` (``set_aside``), with an error naming it: the next run remakes
+it with the job that made it (and reruns what depends on it). Only a workflow
+job does that (``STUDY_JOB``, set by ``workflow/rules/common.smk``), and only to
+a file in its study folder's ``results/``: a command run by hand (``luckyao
+export``, ``open_case``, ``open_figure``, ``draw``) never moves, renames or
+writes the files it reads, it names the problem. Conventions: CF-1.8 style,
+``units`` and ``long_name`` on every variable; provenance in global attributes.
 """
 
 import datetime
@@ -77,10 +81,32 @@ def require_finite(values, what: str, variable: str, index_names=()) -> None:
         raise ValueError(f"{what}: variable '{variable}' is not finite at {where}")
 
 
+STUDY_JOB = "LUCKYAO_STUDY_JOB"
+"""Set to ``1`` in the command of every job of the workflow (``live_run.STUDY_JOB``, named
+again here: this module, in every step's code inputs, imports no orchestration)."""
+
+
+def may_set_aside(path) -> bool:
+    """Whether ``path`` may be set aside here: only by a job of the workflow, and only a
+    file in its study folder's ``results/`` (the working folder's), after links resolved;
+    never a file a user handed to a command (``luckyao export README.md``)."""
+    if os.environ.get(STUDY_JOB) != "1":
+        return False
+    results = (Path.cwd() / "results").resolve()
+    try:
+        resolved = Path(path).resolve()
+    except (OSError, RuntimeError):
+        return False
+    return resolved.is_relative_to(results) and resolved != results
+
+
 def set_aside(path, problem: str) -> str:
     """Rename the bad study file ``path`` to ``<name>.bad`` (replacing an older one), so
-    that the next run remakes it; returns ``problem`` saying so."""
+    that the next run remakes it, when this process may (``may_set_aside``); returns
+    ``problem`` saying what was done. A file it may not set aside is left where it is."""
     path = Path(path)
+    if not may_set_aside(path):
+        return problem
     bad = path.with_name(path.name + ".bad")
     try:
         os.replace(path, bad)
@@ -135,7 +161,8 @@ def write_dataset(ds: xr.Dataset, path, compress: bool = True, allow_nan=()) -> 
 def open_dataset(path, what: str, allow_nan=None, remake: bool = True) -> xr.Dataset:
     """Open a study file fully into memory with a clear error if missing or corrupt. With
     ``allow_nan`` (a set), every float variable but those must be finite. A corrupt or
-    non-finite file is set aside for the next run to remake (``remake``)."""
+    non-finite file is set aside for the next run to remake (``remake``) when this is a
+    workflow job and the file its study's (``may_set_aside``); otherwise left as it is."""
     path = Path(path)
     if not path.exists():
         raise FileNotFoundError(f"{what} file '{path}' is missing; rerun the step that makes it")

@@ -1,0 +1,142 @@
+"""Nothing lost, nothing silently wrong (issue 40): a set-aside or missing intermediate is
+remade with what depends on it; NaN in a lucky.nc is refused by every reader; a command
+run by hand never moves the files it reads; every job holds the study's run lock, so a
+job orphaned by a killed Snakemake keeps the study locked; a copied or moved checkout
+rebuilds a .venv made for another."""
+
+import json
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import netCDF4
+import numpy as np
+import pytest
+import xarray as xr
+import yaml
+
+from luckyao.study.cli import main
+from luckyao.study.datasets import STUDY_JOB
+
+REPO = Path(__file__).resolve().parents[1]
+TINY = REPO / "tests" / "data" / "tiny.yaml"
+
+
+def snakemake(workdir: Path, *args, timeout=900):
+    command = [sys.executable, "-m", "snakemake", "-s", str(REPO / "Snakefile"), "-d", str(workdir),
+               "--cores", "2", *args]
+    return subprocess.run(command, capture_output=True, text=True, timeout=timeout)
+
+
+def planned(result) -> set[tuple[str, str]]:
+    """(rule, wildcards) of every job a dry run plans, rule ``all`` left out."""
+    jobs, rule = [], None
+    for line in result.stdout.splitlines():
+        line = line.strip()
+        if line.startswith(("rule ", "localrule ")):
+            rule = line.split()[1].rstrip(":")
+            jobs.append([rule, ""])
+        elif line.startswith("wildcards:") and jobs:
+            jobs[-1][1] = line.split(":", 1)[1].strip()
+    return {(rule, wildcards) for rule, wildcards in jobs if rule != "all"}
+
+
+def rules(jobs) -> set[str]:
+    return {rule for rule, _ in jobs}
+
+
+@pytest.fixture(scope="module")
+def finished(tmp_path_factory):
+    """A finished run of a two-case tiny study (frames kept): ``good`` without AO, ``ltao``
+    with the LGS chain's products (screens, reconstructor, command matrix, slopes)."""
+    workdir = tmp_path_factory.mktemp("finished")
+    study = yaml.safe_load(TINY.read_text())
+    study["keep_frames"] = True
+    study["cases"] = {name: study["cases"][name] for name in ("good", "ltao")}
+    study["figures"] = {"table": dict(study["figures"]["table"], cases=["good", "ltao"])}
+    (workdir / "config").mkdir()
+    (workdir / "config" / "config.yaml").write_text(yaml.safe_dump(study))
+    result = snakemake(workdir)
+    assert result.returncode == 0, result.stderr[-3000:]
+    assert planned(snakemake(workdir, "--dry-run")) == set()
+    return workdir
+
+
+def copy_of(finished: Path, tmp_path: Path) -> Path:
+    """The finished study copied with its times (as ``cp -a``)."""
+    copy = tmp_path / "study"
+    shutil.copytree(finished, copy, symlinks=True)
+    return copy
+
+
+def product(workdir: Path, folder: str) -> Path:
+    """The one product file of ``results/<folder>/`` (``.nc``; the screens' ``.npy``)."""
+    pattern = "*.npy" if folder == "turbulence" else "*.nc"
+    (path,) = (workdir / "results" / folder).glob(pattern)
+    return path
+
+
+# --- 4. a command run by hand never moves, renames or writes what it reads ----------------------
+
+def test_export_of_a_file_that_is_not_a_lucky_dataset_leaves_it_alone(tmp_path):
+    """``luckyao export README.md --out x.fits`` renamed README.md to README.md.bad."""
+    readme = tmp_path / "README.md"
+    shutil.copy(REPO / "README.md", readme)
+    env = {k: v for k, v in os.environ.items() if k != STUDY_JOB}
+    done = subprocess.run([sys.executable, "-m", "luckyao", "export", "README.md", "--out", "x.fits"], cwd=tmp_path,
+                          capture_output=True, text=True, env=env)
+    assert done.returncode == 1
+    assert "README.md" in done.stderr and ".bad" not in done.stderr and "remakes" not in done.stderr
+    assert readme.read_bytes() == (REPO / "README.md").read_bytes()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["README.md"]
+
+
+def corrupt_study(tmp_path: Path) -> Path:
+    """A study folder whose lucky.nc, telemetry.nc and figure data are not netCDF."""
+    for name in ("results/cases/c/lucky.nc", "results/cases/c/telemetry.nc", "figures/f.nc"):
+        path = tmp_path / name
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_bytes(b"not a netCDF file" * 100)
+    return tmp_path
+
+
+@pytest.mark.parametrize("opener", ["open_case", "open_telemetry", "open_figure"])
+def test_the_python_interface_never_sets_a_file_aside(tmp_path, monkeypatch, opener):
+    import luckyao
+
+    study = corrupt_study(tmp_path)
+    monkeypatch.chdir(study)
+    name = "f" if opener == "open_figure" else "c"
+    with pytest.raises(OSError, match="unreadable or corrupt") as raised:
+        getattr(luckyao, opener)(name)
+    assert "set aside" not in str(raised.value)
+    assert sorted(p.name for p in study.rglob("*") if p.is_file()) == ["f.nc", "lucky.nc", "telemetry.nc"]
+
+
+def test_a_job_sets_aside_only_files_of_its_study_folder(tmp_path, monkeypatch):
+    """Even a job of the workflow sets aside only a file under its study folder's results/
+    (not one given by another path, nor one that only links into it)."""
+    from luckyao.study.datasets import open_dataset
+
+    study = corrupt_study(tmp_path / "study")
+    elsewhere = tmp_path / "elsewhere.nc"
+    elsewhere.write_bytes(b"not a netCDF file")
+    link = study / "results" / "link.nc"
+    link.symlink_to(elsewhere)
+    monkeypatch.setenv(STUDY_JOB, "1")
+    monkeypatch.chdir(study)
+    for path in (elsewhere, link, study / "figures" / "f.nc"):
+        with pytest.raises(OSError, match="corrupt") as raised:
+            open_dataset(path, "x")
+        assert "set aside" not in str(raised.value) and path.exists()
+    with pytest.raises(OSError, match="set aside"):
+        open_dataset("results/cases/c/lucky.nc", "lucky")
+    assert (study / "results" / "cases" / "c" / "lucky.nc.bad").exists()
+    monkeypatch.delenv(STUDY_JOB)
+    with pytest.raises(OSError, match="corrupt") as raised:
+        open_dataset("results/cases/c/telemetry.nc", "telemetry")
+    assert "set aside" not in str(raised.value)
