@@ -140,3 +140,89 @@ def test_a_job_sets_aside_only_files_of_its_study_folder(tmp_path, monkeypatch):
     with pytest.raises(OSError, match="corrupt") as raised:
         open_dataset("results/cases/c/telemetry.nc", "telemetry")
     assert "set aside" not in str(raised.value)
+
+
+# --- 5. every job holds the run lock: an orphaned job keeps the study locked ---------------------
+
+def children(pid: int) -> list[int]:
+    """Every descendant of ``pid`` (Linux /proc)."""
+    parents = {}
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        parents.setdefault(int(fields[1]), []).append(int(stat.parent.name))
+    found, todo = [], [pid]
+    while todo:
+        for child in parents.get(todo.pop(), []):
+            found.append(child)
+            todo.append(child)
+    return found
+
+
+def holds_flock(pid: int, path: Path) -> bool:
+    """Whether process ``pid`` holds a flock on ``path`` (/proc/locks, by inode)."""
+    inode = path.stat().st_ino
+    for line in Path("/proc/locks").read_text().splitlines():
+        fields = line.split()
+        if len(fields) >= 6 and fields[1] == "FLOCK" and fields[4] == str(pid) \
+                and fields[5].rsplit(":", 1)[-1] == str(inode):
+            return True
+    return False
+
+
+def is_job(pid: int) -> bool:
+    try:
+        return b"luckyao\x00lucky" in Path(f"/proc/{pid}/cmdline").read_bytes()
+    except OSError:
+        return False
+
+
+@pytest.mark.workflow
+def test_a_job_orphaned_by_a_killed_snakemake_keeps_the_study_locked(finished, tmp_path):
+    """``kill -9`` of Snakemake's main process alone: its running job lives on. It holds the
+    study's run lock itself, so ``bash run.sh study`` leaves the study alone (the half-written
+    file the job may be writing kept); once the job has ended, the study is cleaned up as after
+    any hard kill. Before, run.sh called the lock stale and deleted the orphan's file."""
+    workdir = copy_of(finished, tmp_path)
+    lock = workdir / ".snakemake" / "luckyao-run.lock"
+    run = subprocess.Popen([sys.executable, "-m", "snakemake", "-s", str(REPO / "Snakefile"), "-d", str(workdir),
+                            "--cores", "1", "--forcerun", "lucky", "results/cases/good/lucky.nc"],
+                           stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+    job, orphans = None, []
+    try:
+        deadline = time.monotonic() + 300
+        while job is None:
+            assert run.poll() is None and time.monotonic() < deadline, "no job ever held the study's run lock"
+            job = next((pid for pid in children(run.pid) if is_job(pid) and holds_flock(pid, lock)), None)
+            time.sleep(0.02)
+        orphans = children(run.pid)
+        os.kill(run.pid, signal.SIGKILL)  # Snakemake's main process alone
+        run.wait()
+        for pid in orphans:  # the orphans live on, held still while run.sh looks
+            os.kill(pid, signal.SIGSTOP)
+        partial = workdir / "results" / "cases" / "good" / "lucky.nc.partial"
+        partial.write_bytes(b"the orphan's half-written file")
+        result = subprocess.run(["bash", str(REPO / "run.sh"), "study", "-d", str(workdir), "-n"],
+                                capture_output=True, text=True, timeout=600)
+        assert "is using" in result.stderr, result.stderr[-2000:]
+        assert partial.exists(), "the orphan's file was deleted"
+        assert any((workdir / ".snakemake" / "locks").iterdir()), "the killed run's Snakemake lock was removed"
+        for pid in orphans:
+            os.kill(pid, signal.SIGKILL)
+        deadline = time.monotonic() + 30
+        while any(holds_flock(pid, lock) for pid in orphans) and time.monotonic() < deadline:
+            time.sleep(0.05)
+        result = subprocess.run(["bash", str(REPO / "run.sh"), "study", "-d", str(workdir), "-n"],
+                                capture_output=True, text=True, timeout=600)
+        assert "is using" not in result.stderr and "stale lock" in result.stderr, result.stderr[-2000:]
+        assert not partial.exists()
+    finally:
+        for pid in [run.pid, *children(run.pid), *orphans]:
+            for sig in (signal.SIGKILL, signal.SIGCONT):
+                try:
+                    os.kill(pid, sig)
+                except ProcessLookupError:
+                    pass
+        run.wait()
