@@ -80,6 +80,89 @@ def product(workdir: Path, folder: str) -> Path:
     return path
 
 
+# --- 1. a set-aside or missing intermediate is remade, with what depends on it -----------------
+
+@pytest.mark.workflow
+def test_the_issues_reproduction_a_truncated_telemetry_is_remade_by_the_next_run(finished, tmp_path):
+    """``truncate -s 20000 telemetry.nc``: the run fails and sets it aside; the next one remakes
+    it, the case's lucky.nc (deleted by Snakemake with the failed job) and the figure and
+    FITS file that show it, identical to the first run's; before, it said "Nothing to be done"
+    with the case's lucky.nc gone."""
+    workdir = copy_of(finished, tmp_path)
+    case = workdir / "results" / "cases" / "good"
+    before = xr.load_dataset(case / "lucky.nc")
+    figure_time = (workdir / "figures" / "table.png").stat().st_mtime
+    with open(case / "telemetry.nc", "r+b") as f:
+        f.truncate(20000)
+    failed = snakemake(workdir)
+    assert failed.returncode != 0
+    assert "set aside as 'results/cases/good/telemetry.nc.bad': the next run remakes it" in failed.stderr
+    assert not (case / "telemetry.nc").exists() and not (case / "lucky.nc").exists()
+    again = snakemake(workdir)
+    assert again.returncode == 0, again.stderr[-3000:]
+    assert "Nothing to be done" not in again.stdout + again.stderr
+    assert xr.load_dataset(case / "lucky.nc").drop_attrs().identical(before.drop_attrs())
+    assert (workdir / "figures" / "table.png").stat().st_mtime > figure_time
+    assert (workdir / "fits" / "good.fits").stat().st_mtime > figure_time
+    assert planned(snakemake(workdir, "--dry-run")) == set()
+
+
+SIMULATION = {"simulate", "lucky", "figure", "export"}
+"""What reruns after a case's simulation inputs are remade: the case and all it feeds."""
+
+
+@pytest.mark.workflow
+@pytest.mark.parametrize("what, consumer, outputs, expected", [
+    ("good/telemetry.nc", "good", ["lucky.nc"], {"simulate", "lucky", "figure", "export"}),
+    ("good/frames.nc", "good", ["lucky.nc"], {"simulate", "lucky", "figure", "export"}),
+    ("turbulence", "good", ["frames.nc", "telemetry.nc"], {"turbulence", "lgs_slopes", *SIMULATION}),
+    ("reconstructors", "ltao", ["frames.nc", "telemetry.nc"], {"reconstructor", *SIMULATION}),
+    ("commands", "ltao", ["frames.nc", "telemetry.nc"], {"commands", *SIMULATION}),
+    ("slopes", "ltao", ["frames.nc", "telemetry.nc"], {"lgs_slopes", *SIMULATION}),
+])
+def test_an_input_set_aside_by_a_failed_job_is_remade_with_what_depends_on_it(finished, tmp_path, what, consumer,
+                                                                                outputs, expected):
+    """The state a job leaves that found its input bad (truncated, NaN): the input set aside
+    as ``.bad``, the job's own ``outputs`` deleted by Snakemake (the lucky job's, the
+    simulation's). The next run remakes the input and the case, and redraws what shows it
+    (before: nothing planned, the case gone)."""
+    workdir = copy_of(finished, tmp_path)
+    cases = workdir / "results" / "cases"
+    path = cases / what if "/" in what else product(workdir, what)
+    path.rename(path.with_name(path.name + ".bad"))
+    for name in outputs:
+        (cases / consumer / name).unlink(missing_ok=True)
+    jobs = planned(snakemake(workdir, "--dry-run"))
+    assert rules(jobs) == expected, jobs
+    assert ("lucky", f"case={consumer}") in jobs and ("export", f"case={consumer}") in jobs
+
+
+@pytest.mark.workflow
+@pytest.mark.parametrize("what, step", [("reconstructors", "reconstructor"), ("slopes", "lgs_slopes"),
+                                        ("turbulence", "turbulence")])
+def test_a_deleted_product_is_remade_and_what_read_it_rerun(finished, tmp_path, what, step):
+    """A product deleted whose consumers' outputs are all there is remade, and the cases that
+    read it rerun (the simulations read the LGS slopes as ``ancient``, yet a slopes product
+    that must be made again reruns them: Snakemake's rule, said in the README)."""
+    workdir = copy_of(finished, tmp_path)
+    product(workdir, what).unlink()
+    assert {step, *SIMULATION} <= rules(planned(snakemake(workdir, "--dry-run")))
+
+
+@pytest.mark.workflow
+def test_a_study_with_a_case_missing_is_not_archived(finished, tmp_path, capsys):
+    """``luckyao archive`` names the case whose results are missing (before: archived without it)."""
+    workdir = copy_of(finished, tmp_path)
+    (workdir / "results" / "cases" / "good" / "telemetry.nc").rename(
+        workdir / "results" / "cases" / "good" / "telemetry.nc.bad")
+    (workdir / "results" / "cases" / "good" / "lucky.nc").unlink()
+    assert main(["archive", "--study-dir", str(workdir), "--out", str(tmp_path / "a.tar")]) == 1
+    err = capsys.readouterr().err
+    assert "case 'good': results/cases/good/lucky.nc missing" in err
+    assert "case 'good': results/cases/good/telemetry.nc missing" in err
+    assert not (tmp_path / "a.tar").exists()
+
+
 # --- 4. a command run by hand never moves, renames or writes what it reads ----------------------
 
 def test_export_of_a_file_that_is_not_a_lucky_dataset_leaves_it_alone(tmp_path):

@@ -13,7 +13,7 @@ from luckyao.study.resources import (commands_memory_bytes, lucky_memory_bytes, 
 from luckyao.study.config import (ConfigError, calibration_key, calibration_spec, canonical_json, commands_key,
                                   commands_spec, imaged_targets, lgs_twin, lucky_settings, plausibility_warnings,
                                   reconstructor_key, reconstructor_spec, sha256, SIGNAL_KINDS, slopes_key, slopes_spec,
-                                  sweep_detectors,
+                                  sweep_detectors, drawn_cases,
                                   turbulence_key, turbulence_spec, unused_cases, validate_study)
 from luckyao.study.sweeps import expand_sweeps, sweep_points
 
@@ -119,9 +119,43 @@ def figure_inputs(fig):
     return [f"results/cases/{c}/lucky.nc" for c in figure["cases"]]
 
 
-DRAWN_CASES = sorted({c for fig in STUDY["figures"] for c in STUDY["figures"][fig]["cases"]
-                      if STUDY["figures"][fig]["kind"] != "asterism"})
+DRAWN_CASES = drawn_cases(STUDY)
 """The cases whose results a figure reads: `all` runs them and exports their images as FITS."""
+
+
+def kept_files(case):
+    """Every file a finished case keeps in the study folder: its ``lucky.nc`` and what its
+    simulation made and read (``simulation_files``). Targets of ``all``: Snakemake remakes a
+    missing intermediate only when something asks for it, so without them a file set aside
+    (``<name>.bad``) or deleted whose consumers' outputs are there would stay missing, and a
+    case whose ``lucky.nc`` is gone would be "Nothing to be done"; with them the next run
+    remakes it and reruns what depends on it."""
+    return [f"results/cases/{case}/lucky.nc", *simulation_files(case)]
+
+
+def simulation_files(case):
+    """A case's ``telemetry.nc`` (and ``frames.nc`` when kept) and the kept products its
+    simulation reads, as rule ``simulate`` names them: screens, reconstructor, command
+    matrix, calibration, LGS slopes and the calibration they were measured with, and its LGS
+    twin's (the twin's own simulation files)."""
+    twin = LGS_TWIN[case]
+    key = turbulence_key(TURBULENCE[case])
+    files = [f"results/cases/{case}/telemetry.nc", f"results/turbulence/{key}.npy", f"results/turbulence/{key}.nc"]
+    if STUDY.get("keep_frames", False):
+        files.append(f"results/cases/{case}/frames.nc")
+    files += [] if twin else listify(reconstructor_file(case))
+    files += listify(commands_file(case))
+    files += [] if twin or SLOPES[case] else listify(calibration_file(case))
+    if SLOPES[case]:
+        files += [slopes_file(case), *listify(calibration_file(SLOPES_CASES[slopes_key(SLOPES[case])][0]))]
+    if twin:
+        files += simulation_files(twin)
+    return files
+
+
+def listify(value):
+    """A file or [] as a list of files."""
+    return value if isinstance(value, list) else [value]
 
 
 def figure_caption_rst(fig):

@@ -32,6 +32,7 @@ from .config import (
     canonical_json,
     commands_key,
     commands_spec,
+    drawn_cases,
     lgs_twin,
     load_study,
     lucky_settings,
@@ -44,6 +45,7 @@ from .config import (
     turbulence_spec,
 )
 from .datasets import atomic_path, code_version
+from .sweeps import expand_sweeps
 
 FORMAT = "luckyao-archive/1"
 REPO = Path(__file__).resolve().parents[3]
@@ -209,6 +211,11 @@ def archive(study_dir=".", configfiles=(), out=None, echo=print) -> Path:
     if missing:
         raise ArchiveError("\n".join(f"{name}: missing; finish the study (snakemake) before archiving"
                                      for name in missing))
+    drawn = drawn_cases(expand_sweeps(study))
+    absent = [f"case '{case}': results/cases/{case}/{name} missing; rerun the study (snakemake) before archiving"
+              for case in drawn for name in CASE_FILES if not (study_dir / "results" / "cases" / case / name).is_file()]
+    if absent:  # a study is never archived with a case its figures show missing
+        raise ArchiveError("\n".join(absent))
     archived_cases = [c for c in cases if (study_dir / "results" / "cases" / c / "lucky.nc").is_file()]
     for case in archived_cases:
         files += [f"results/cases/{case}/{name}" for name in CASE_FILES
