@@ -163,6 +163,51 @@ def test_a_study_with_a_case_missing_is_not_archived(finished, tmp_path, capsys)
     assert not (tmp_path / "a.tar").exists()
 
 
+# --- 2. NaN in lucky.nc: every reader refuses it, naming the variable and the index -------------
+
+def poke_nan(path: Path, detector: str) -> None:
+    """NaN into the integrated Strehl of ``detector`` (first registration, criterion, fraction)."""
+    with netCDF4.Dataset(path, "r+") as nc:
+        index = [str(d) for d in nc["detector"][:]].index(detector)
+        dims = nc["strehl"].dimensions
+        where = tuple(index if dim == "detector" else 0 for dim in dims)
+        nc["strehl"][where] = np.nan
+
+
+@pytest.mark.workflow
+def test_nan_in_a_lucky_file_is_refused_by_the_figure_the_export_and_the_archive(finished, tmp_path, capsys):
+    workdir = copy_of(finished, tmp_path)
+    lucky = workdir / "results" / "cases" / "good" / "lucky.nc"
+    poke_nan(lucky, "noiseless")
+    message = r"variable 'strehl' is not finite at .*detector=\d \('noiseless'\)"
+    from luckyao.study.export import export_fits
+    from luckyao.study.figures import draw_figure
+
+    with pytest.raises(ValueError, match=f"lucky file '{lucky}': {message}"):
+        export_fits(lucky, tmp_path / "good.fits")
+    assert not (tmp_path / "good.fits").exists()
+    settings = sorted((workdir / "results" / "figures" / "settings").glob("table_*.json"))[-1]
+    with pytest.raises(ValueError, match=message):
+        draw_figure("table", json.loads(settings.read_text()), [lucky, workdir / "results/cases/ltao/lucky.nc"],
+                    str(tmp_path / "table"))
+    assert not (tmp_path / "table.nc").exists()
+    assert main(["archive", "--study-dir", str(workdir), "--out", str(tmp_path / "a.tar")]) == 1
+    assert "case 'good': lucky file" in capsys.readouterr().err
+    assert not (tmp_path / "a.tar").exists()
+    assert lucky.exists(), "a reader run by hand set the file aside"
+
+
+@pytest.mark.workflow
+def test_nan_where_a_noisy_image_has_no_flux_is_accepted(finished, tmp_path):
+    """A noisy detector's undefined metric (no positive flux) is no error: the writer allows it."""
+    workdir = copy_of(finished, tmp_path)
+    lucky = workdir / "results" / "cases" / "good" / "lucky.nc"
+    poke_nan(lucky, "faint")
+    from luckyao.study.export import export_fits
+
+    assert export_fits(lucky, tmp_path / "good.fits") > 0
+
+
 # --- 4. a command run by hand never moves, renames or writes what it reads ----------------------
 
 def test_export_of_a_file_that_is_not_a_lucky_dataset_leaves_it_alone(tmp_path):

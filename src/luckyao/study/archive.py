@@ -44,7 +44,7 @@ from .config import (
     turbulence_key,
     turbulence_spec,
 )
-from .datasets import atomic_path, code_version
+from .datasets import atomic_path, code_version, open_dataset, require_finite_lucky
 from .sweeps import expand_sweeps
 
 FORMAT = "luckyao-archive/1"
@@ -217,6 +217,15 @@ def archive(study_dir=".", configfiles=(), out=None, echo=print) -> Path:
     if absent:  # a study is never archived with a case its figures show missing
         raise ArchiveError("\n".join(absent))
     archived_cases = [c for c in cases if (study_dir / "results" / "cases" / c / "lucky.nc").is_file()]
+    bad = []
+    for case in archived_cases:  # the rule lucky.nc is written with, checked again (nothing NaN archived)
+        path = study_dir / "results" / "cases" / case / "lucky.nc"
+        try:
+            require_finite_lucky(open_dataset(path, f"case '{case}' lucky"), f"case '{case}': lucky file '{path}'")
+        except (OSError, ValueError) as err:
+            bad.append(str(err))
+    if bad:
+        raise ArchiveError("\n".join(bad + ["rerun the study (snakemake) before archiving"]))
     for case in archived_cases:
         files += [f"results/cases/{case}/{name}" for name in CASE_FILES
                   if (study_dir / "results" / "cases" / case / name).is_file()]

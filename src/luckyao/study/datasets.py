@@ -100,6 +100,33 @@ def may_set_aside(path) -> bool:
     return resolved.is_relative_to(results) and resolved != results
 
 
+def require_finite_lucky(ds: xr.Dataset, what: str) -> None:
+    """Raise ``ValueError`` naming ``what``, the variable and the first bad element's index
+    (with its label: ``detector=1 ('emccd')``) if a case's lucky results ``ds`` hold NaN or
+    an infinity where they may not: the rule ``lucky.nc`` is written with, and that every
+    reader of it checks again (figures, FITS export, archive). A noisy image can have no
+    positive flux (a few photons under read noise): its metrics are undefined (NaN), per
+    frame (``frame_*``) or integrated. Nothing else may be NaN: every value of the
+    noiseless detectors and every variable without a detector."""
+    noisy = (np.isfinite(ds["photons_per_frame"].values) if "photons_per_frame" in ds.coords
+             else np.zeros(ds.sizes.get("detector", 0), bool))
+    for name, var in ds.data_vars.items():
+        if var.dtype.kind != "f" or name.startswith("frame_"):
+            continue
+        bad = ~np.isfinite(var.values)
+        if "detector" in var.dims and noisy.any():
+            shape = [1] * var.ndim
+            shape[var.dims.index("detector")] = -1
+            bad &= ~noisy.reshape(shape)
+        if bad.any():
+            index = np.unravel_index(np.argmax(bad), bad.shape)
+            where = []
+            for dim, i in zip(var.dims, index):
+                label = ds[dim].values[i] if dim in ds.coords and ds[dim].ndim == 1 else None
+                where.append(f"{dim}={int(i)}" + (f" ('{label}')" if isinstance(label, str) else ""))
+            raise ValueError(f"{what}: variable '{name}' is not finite at {', '.join(where) or '()'}")
+
+
 def set_aside(path, problem: str) -> str:
     """Rename the bad study file ``path`` to ``<name>.bad`` (replacing an older one), so
     that the next run remakes it, when this process may (``may_set_aside``); returns

@@ -15,7 +15,7 @@ import os
 import numpy as np
 import xarray as xr
 
-from .datasets import open_dataset
+from .datasets import open_dataset, require_finite_lucky
 
 
 def _provenance_cards(lucky: xr.Dataset) -> list[tuple]:
@@ -134,6 +134,7 @@ def export_fits(lucky_path, out_path, detectors=None) -> int:
     from astropy.io import fits
 
     lucky = open_dataset(lucky_path, "lucky")
+    require_finite_lucky(lucky, f"lucky file '{lucky_path}'")  # the rule it is written with, checked again
     if "registration" in lucky.dims:  # the baseline's images (cog)
         lucky = lucky.sel(registration="cog")
     primary = fits.PrimaryHDU()
