@@ -354,3 +354,101 @@ def test_a_job_orphaned_by_a_killed_snakemake_keeps_the_study_locked(finished, t
                 except ProcessLookupError:
                     pass
         run.wait()
+
+
+# --- 6. a copied or moved checkout rebuilds a .venv made for another -----------------------------
+
+FAKE_PYTHON = """#!/usr/bin/env bash
+# A stand-in for python: every call logged; "-m venv DIR" makes DIR/bin/python (this script).
+echo "$*" >> "$FAKE_LOG"
+if [ "$1" = -m ] && [ "$2" = venv ]; then mkdir -p "$3/bin"; cp "$FAKE_PYTHON_SCRIPT" "$3/bin/python"; fi
+if [ "$1" = -c ]; then echo /nonexistent; fi
+exit 0
+"""
+
+
+@pytest.fixture
+def fake_checkout(tmp_path):
+    """A checkout of run.sh alone, and ``run(folder)``: ``bash run.sh test`` there with a fake
+    python (no packages installed), returning (its calls, stderr)."""
+    script = tmp_path / "fake-python"
+    script.write_text(FAKE_PYTHON)
+    script.chmod(0o755)
+    checkout = tmp_path / "checkout"
+    checkout.mkdir()
+    shutil.copy(REPO / "run.sh", checkout / "run.sh")
+    (checkout / "pyproject.toml").write_text("[project]\nname = 'x'\n")
+    os.utime(checkout / "pyproject.toml", (1e9, 1e9))
+
+    def run(folder: Path):
+        log = tmp_path / "calls.log"
+        log.unlink(missing_ok=True)
+        env = dict(os.environ, PYTHON=str(script), FAKE_PYTHON_SCRIPT=str(script), FAKE_LOG=str(log))
+        done = subprocess.run(["bash", str(folder / "run.sh"), "test", "-q"], cwd=tmp_path, env=env,
+                              capture_output=True, text=True, timeout=60)
+        assert done.returncode == 0, done.stderr
+        return log.read_text().splitlines(), done.stderr
+
+    return checkout, run
+
+
+def installs(calls: list[str]) -> bool:
+    return any(call.startswith("-m pip install") and "-e" in call.split() for call in calls)
+
+
+def test_a_venv_is_built_once_and_records_its_checkout(fake_checkout):
+    checkout, run = fake_checkout
+    calls, _ = run(checkout)
+    assert calls[0].startswith("-m venv") and installs(calls) and calls[-1] == "-m pytest -q"
+    assert (checkout / ".venv" / ".luckyao-installed").read_text().strip() == str(checkout.resolve())
+    calls, err = run(checkout)
+    assert calls == ["-m pytest -q"] and "rebuilding" not in err
+
+
+def test_a_moved_checkout_rebuilds_its_venv(fake_checkout, tmp_path):
+    """Moved with its .venv: the editable install and the scripts name the old place (before:
+    ModuleNotFoundError); run.sh sees it and builds the .venv again for the new one."""
+    checkout, run = fake_checkout
+    run(checkout)
+    (checkout / ".venv" / "old").write_text("a file of the .venv made for the old place")
+    moved = tmp_path / "moved"
+    checkout.rename(moved)
+    calls, err = run(moved)
+    assert f"not {moved.resolve()}: rebuilding it" in err
+    assert calls[0].startswith("-m venv") and installs(calls)
+    assert not (moved / ".venv" / "old").exists()
+    assert (moved / ".venv" / ".luckyao-installed").read_text().strip() == str(moved.resolve())
+    assert run(moved)[0] == ["-m pytest -q"]
+
+
+def test_a_copied_checkout_rebuilds_its_own_venv_and_leaves_the_originals(fake_checkout, tmp_path):
+    """``cp -a``: the copy's .venv ran the original's code (its editable install); run.sh in the
+    copy rebuilds the copy's .venv, and the original's stays as it was."""
+    checkout, run = fake_checkout
+    run(checkout)
+    (checkout / ".venv" / "old").write_text("the original's")
+    copy = tmp_path / "copy"
+    subprocess.run(["cp", "-a", str(checkout), str(copy)], check=True)
+    calls, err = run(copy)
+    assert "rebuilding" in err and calls[0].startswith("-m venv") and installs(calls)
+    assert (copy / ".venv" / ".luckyao-installed").read_text().strip() == str(copy.resolve())
+    assert (checkout / ".venv" / "old").exists()
+    assert (checkout / ".venv" / ".luckyao-installed").read_text().strip() == str(checkout.resolve())
+    assert run(checkout)[0] == ["-m pytest -q"]
+
+
+def test_a_venv_of_an_older_run_sh_is_judged_by_its_editable_install(fake_checkout):
+    """An empty stamp (run.sh before this): the .venv is this checkout's if its editable install
+    names this checkout's src/ (no rebuild), else rebuilt."""
+    checkout, run = fake_checkout
+    run(checkout)
+    site = checkout / ".venv" / "lib" / "python3.11" / "site-packages"
+    site.mkdir(parents=True)
+    (checkout / ".venv" / ".luckyao-installed").write_text("")
+    pth = site / "__editable__.luckyao-0.1.0.pth"
+    pth.write_text(f"{checkout.resolve()}/src\n")
+    assert run(checkout)[0] == ["-m pytest -q"]
+    pth.write_text("/somewhere/else/src\n")
+    calls, err = run(checkout)
+    assert "built for /somewhere/else" in err and installs(calls)
+
