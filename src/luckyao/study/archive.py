@@ -211,21 +211,7 @@ def archive(study_dir=".", configfiles=(), out=None, echo=print) -> Path:
     if missing:
         raise ArchiveError("\n".join(f"{name}: missing; finish the study (snakemake) before archiving"
                                      for name in missing))
-    drawn = drawn_cases(expand_sweeps(study))
-    absent = [f"case '{case}': results/cases/{case}/{name} missing; rerun the study (snakemake) before archiving"
-              for case in drawn for name in CASE_FILES if not (study_dir / "results" / "cases" / case / name).is_file()]
-    if absent:  # a study is never archived with a case its figures show missing
-        raise ArchiveError("\n".join(absent))
     archived_cases = [c for c in cases if (study_dir / "results" / "cases" / c / "lucky.nc").is_file()]
-    bad = []
-    for case in archived_cases:  # the rule lucky.nc is written with, checked again (nothing NaN archived)
-        path = study_dir / "results" / "cases" / case / "lucky.nc"
-        try:
-            require_finite_lucky(open_dataset(path, f"case '{case}' lucky"), f"case '{case}': lucky file '{path}'")
-        except (OSError, ValueError) as err:
-            bad.append(str(err))
-    if bad:
-        raise ArchiveError("\n".join(bad + ["rerun the study (snakemake) before archiving"]))
     for case in archived_cases:
         files += [f"results/cases/{case}/{name}" for name in CASE_FILES
                   if (study_dir / "results" / "cases" / case / name).is_file()]
@@ -236,6 +222,21 @@ def archive(study_dir=".", configfiles=(), out=None, echo=print) -> Path:
     if stale:
         raise ArchiveError("\n".join(stale + [f"archive with the config files the study ran with "
                                               f"(given: {' + '.join(map(str, sources))}) or rerun it"]))
+    drawn = drawn_cases(expand_sweeps(study))
+    absent = [f"case '{case}': results/cases/{case}/{name} missing; rerun the study (snakemake) before archiving"
+              for case in drawn for name in CASE_FILES if not (study_dir / "results" / "cases" / case / name).is_file()]
+    if absent:  # a study is never archived with a case its figures show missing (after the config's check:
+        # results of another config name their cause better)
+        raise ArchiveError("\n".join(absent))
+    bad = []
+    for case in archived_cases:  # the rule lucky.nc is written with, checked again (nothing NaN archived)
+        path = study_dir / "results" / "cases" / case / "lucky.nc"
+        try:
+            require_finite_lucky(open_dataset(path, f"case '{case}' lucky"), f"case '{case}': lucky file '{path}'")
+        except (OSError, ValueError) as err:
+            bad.append(str(err))
+    if bad:
+        raise ArchiveError("\n".join(bad + ["rerun the study (snakemake) before archiving"]))
     code_versions = set()
     for name in (n for n in files if n.endswith(".nc")):
         with netCDF4.Dataset(study_dir / name) as nc:
