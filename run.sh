@@ -11,11 +11,41 @@ VENV=.venv
 # the same BLAS kernels on every machine, so the same numbers (src/luckyao/__init__.py)
 export OPENBLAS_CORETYPE="${OPENBLAS_CORETYPE:-Haswell}"
 
+# The checkout a .venv was built for: the path its stamp records (a stamp of an older run.sh
+# is empty: the folder of the src/ its editable install names), empty if unknown.
+venv_checkout() {
+    local stamp="$VENV/.luckyao-installed" recorded="" pth
+    if [ -f "$stamp" ]; then
+        recorded="$(head -n 1 "$stamp")"
+    fi
+    if [ -z "$recorded" ]; then
+        for pth in "$VENV"/lib/python*/site-packages/__editable__.luckyao-*.pth; do
+            if [ -f "$pth" ]; then
+                recorded="$(dirname "$(head -n 1 "$pth")")"
+            fi
+        done
+    fi
+    printf '%s' "$recorded"
+}
+
 setup() {
+    local here built
+    here="$(pwd -P)"
+    # A .venv built for another checkout (this one copied, cp -a, or moved with its .venv):
+    # its editable install and its scripts name that checkout's paths, so it would run the
+    # other checkout's code, or fail to import any. Rebuilt here, for this checkout.
+    if [ -e "$VENV" ] || [ -L "$VENV" ]; then
+        built="$(venv_checkout)"
+        if [ "$built" != "$here" ]; then
+            echo "luckyao: .venv was built for ${built:-another checkout}, not $here: rebuilding it" >&2
+            rm -rf "$VENV"
+        fi
+    fi
     if [ ! -x "$VENV/bin/python" ]; then
         "$PYTHON" -m venv "$VENV"
     fi
-    # reinstall only when the package metadata changed
+    # reinstall only when the package metadata changed (or the .venv is new); the stamp
+    # records the checkout it was built for
     local stamp="$VENV/.luckyao-installed"
     if [ ! -f "$stamp" ] || [ pyproject.toml -nt "$stamp" ]; then
         "$VENV/bin/python" -m pip install --quiet --upgrade pip
@@ -25,7 +55,7 @@ setup() {
         "$VENV/bin/python" -m pip install --quiet --no-compile -e ".[test]"
         "$VENV/bin/python" -m compileall -q -j 0 src \
             "$("$VENV/bin/python" -c 'import sysconfig; print(sysconfig.get_paths()["purelib"])')" > /dev/null || true
-        touch "$stamp"
+        printf '%s\n' "$here" > "$stamp"
     fi
 }
 

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 import xarray as xr
 
+from luckyao.io.datasets import STUDY_JOB, FrameWriter, iter_frame_blocks, open_dataset, provenance, write_dataset
 from luckyao.io.hashing import sha256
-from luckyao.io.datasets import FrameWriter, iter_frame_blocks, open_dataset, provenance, write_dataset
 
 
 def test_provenance_carries_config_hash_version_and_seed():
@@ -59,8 +59,18 @@ def test_frames_round_trip(tmp_path):
     assert open_dataset(tmp_path / "v.nc", "v").v.values.tolist() == [0.0, 1.0, 2.0]
 
 
-def test_nan_in_a_frame_cube_is_named_against_it_and_the_cube_set_aside_for_the_next_run(tmp_path):
-    path = tmp_path / "frames.nc"
+@pytest.fixture
+def study_job(tmp_path, monkeypatch):
+    """This process as a job of the workflow (``STUDY_JOB``) in the study folder ``tmp_path``:
+    the folder of its results, where a bad input is set aside."""
+    monkeypatch.setenv(STUDY_JOB, "1")
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "results").mkdir()
+    return tmp_path / "results"
+
+
+def test_nan_in_a_frame_cube_is_named_against_it_and_the_cube_set_aside_for_the_next_run(study_job):
+    path = study_job / "frames.nc"
     with FrameWriter(path, [0], 70, 8, 0.1, {"title": "t"}) as writer:
         writer.write(0, np.ones((1, 70, 8, 8), np.float32))
     with netCDF4.Dataset(path, "r+") as nc:
@@ -71,8 +81,8 @@ def test_nan_in_a_frame_cube_is_named_against_it_and_the_cube_set_aside_for_the_
     assert not path.exists() and path.with_name("frames.nc.bad").exists()
 
 
-def test_nan_in_a_telemetry_file_is_named_against_it_and_the_file_set_aside(tmp_path):
-    path = tmp_path / "telemetry.nc"
+def test_nan_in_a_telemetry_file_is_named_against_it_and_the_file_set_aside(study_job):
+    path = study_job / "telemetry.nc"
     write_dataset(xr.Dataset({"true_rms_m": (("target", "frame"), np.ones((1, 5))),
                               "axis_strehl": (("target", "frame"), np.full((1, 5), np.nan))}), path,
                   allow_nan={"axis_strehl"})
@@ -85,8 +95,8 @@ def test_nan_in_a_telemetry_file_is_named_against_it_and_the_file_set_aside(tmp_
     assert not path.exists() and path.with_name("telemetry.nc.bad").exists()
 
 
-def test_a_truncated_input_is_set_aside_for_the_next_run(tmp_path):
-    path = tmp_path / "reconstructor.nc"
+def test_a_truncated_input_is_set_aside_for_the_next_run(study_job):
+    path = study_job / "reconstructor.nc"
     write_dataset(xr.Dataset({"r": ("x", np.arange(1000.0))}), path, compress=False)
     path.write_bytes(path.read_bytes()[:2000])
     with pytest.raises(OSError, match=r"reconstructor file '.*' is unreadable or corrupt.*set aside"):

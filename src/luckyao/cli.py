@@ -243,6 +243,10 @@ def cmd_lock(args) -> None:
 def main(argv=None) -> int:
     """Run one subcommand; a failure is one line naming the file or key (no traceback;
     ``LUCKYAO_TRACEBACK=1`` shows it)."""
+    from .jobs.live_run import hold_job_lock, is_study_job
+
+    if is_study_job():  # a job of the workflow holds its study's run lock while it lives, first of all
+        hold_job_lock()
     args = build_parser().parse_args(argv)
     _setup_logging()
     signal.signal(signal.SIGXFSZ, signal.SIG_IGN)  # a file over the size limit: a named write error, not a kill

@@ -6,7 +6,7 @@ import sys
 
 from luckyao.jobs.code_deps import step_sources
 from luckyao.io.datasets import atomic_path
-from luckyao.jobs.live_run import hold_shared
+from luckyao.jobs.live_run import STUDY_JOB, hold_shared
 from luckyao.jobs.resources import (StudyTooLarge, checked_study, commands_memory_bytes, lucky_memory_bytes,
                                      machine_memory_bytes, mem_mb, reconstructor_memory_bytes,
                                      simulate_memory_bytes, slopes_memory_bytes, turbulence_memory_bytes)
@@ -17,7 +17,7 @@ from luckyao.studyspec.products import (calibration_key, calibration_spec, comma
                                    turbulence_spec)
 from luckyao.studyspec.resolved import imaged_targets
 from luckyao.studyspec.schema import ConfigError
-from luckyao.studyspec.study import plausibility_warnings, unused_cases
+from luckyao.studyspec.study import drawn_cases, plausibility_warnings, unused_cases
 from luckyao.studyspec.sweeps import sweep_points
 from luckyao.threads import shell_prefix
 
@@ -60,8 +60,10 @@ calibration and memory estimate serve the product: they share its LGS chain)."""
 for _name, _spec in SLOPES.items():
     if _spec is not None:
         SLOPES_CASES.setdefault(slopes_key(_spec), []).append(_name)
-# every job on one thread (src/luckyao/threads.py); every value formatted into a command is quoted (:q)
-LUCKYAO = f"{shell_prefix()}{shlex.quote(sys.executable)} -m luckyao"
+# every job on one thread (src/luckyao/threads.py) and marked as a job of the workflow
+# (STUDY_JOB: it holds the study's run lock while it lives and may set a bad input of the
+# study aside); every value formatted into a command is quoted (:q)
+LUCKYAO = f"{STUDY_JOB}=1 {shell_prefix()}{shlex.quote(sys.executable)} -m luckyao"
 
 
 def reconstructor_file(case):
@@ -122,9 +124,43 @@ def figure_inputs(fig):
     return [f"results/cases/{c}/lucky.nc" for c in figure["cases"]]
 
 
-DRAWN_CASES = sorted({c for fig in STUDY["figures"] for c in STUDY["figures"][fig]["cases"]
-                      if STUDY["figures"][fig]["kind"] != "asterism"})
+DRAWN_CASES = drawn_cases(STUDY)
 """The cases whose results a figure reads: `all` runs them and exports their images as FITS."""
+
+
+def kept_files(case):
+    """Every file a finished case keeps in the study folder: its ``lucky.nc`` and what its
+    simulation made and read (``simulation_files``). Targets of ``all``: Snakemake remakes a
+    missing intermediate only when something asks for it, so without them a file set aside
+    (``<name>.bad``) or deleted whose consumers' outputs are there would stay missing, and a
+    case whose ``lucky.nc`` is gone would be "Nothing to be done"; with them the next run
+    remakes it and reruns what depends on it."""
+    return [f"results/cases/{case}/lucky.nc", *simulation_files(case)]
+
+
+def simulation_files(case):
+    """A case's ``telemetry.nc`` (and ``frames.nc`` when kept) and the kept products its
+    simulation reads, as rule ``simulate`` names them: screens, reconstructor, command
+    matrix, calibration, LGS slopes and the calibration they were measured with, and its LGS
+    twin's (the twin's own simulation files)."""
+    twin = LGS_TWIN[case]
+    key = turbulence_key(TURBULENCE[case])
+    files = [f"results/cases/{case}/telemetry.nc", f"results/turbulence/{key}.npy", f"results/turbulence/{key}.nc"]
+    if STUDY.get("keep_frames", False):
+        files.append(f"results/cases/{case}/frames.nc")
+    files += [] if twin else listify(reconstructor_file(case))
+    files += listify(commands_file(case))
+    files += [] if twin or SLOPES[case] else listify(calibration_file(case))
+    if SLOPES[case]:
+        files += [slopes_file(case), *listify(calibration_file(SLOPES_CASES[slopes_key(SLOPES[case])][0]))]
+    if twin:
+        files += simulation_files(twin)
+    return files
+
+
+def listify(value):
+    """A file or [] as a list of files."""
+    return value if isinstance(value, list) else [value]
 
 
 def figure_caption_rst(fig):

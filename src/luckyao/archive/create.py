@@ -25,14 +25,15 @@ from pathlib import Path
 import netCDF4
 import yaml
 
-from ..version import __version__
-from ..studyspec.products import (calibration_key, calibration_spec, commands_key, commands_spec, lgs_twin,
-                             reconstructor_key, reconstructor_spec, slopes_key, slopes_spec, turbulence_key,
-                             turbulence_spec)
+from ..io.datasets import atomic_path, code_version, open_dataset, require_finite_lucky
 from ..io.hashing import canonical_json, sha256
-from ..studyspec.study import load_study
 from ..studyspec.lucky import lucky_settings
-from ..io.datasets import atomic_path, code_version
+from ..studyspec.products import (calibration_key, calibration_spec, commands_key, commands_spec, lgs_twin,
+                                  reconstructor_key, reconstructor_spec, slopes_key, slopes_spec, turbulence_key,
+                                  turbulence_spec)
+from ..studyspec.study import drawn_cases, load_study
+from ..studyspec.sweeps import expand_sweeps
+from ..version import __version__
 
 FORMAT = "luckyao-archive/1"
 REPO = Path(__file__).resolve().parents[3]
@@ -209,6 +210,21 @@ def archive(study_dir=".", configfiles=(), out=None, echo=print) -> Path:
     if stale:
         raise ArchiveError("\n".join(stale + [f"archive with the config files the study ran with "
                                               f"(given: {' + '.join(map(str, sources))}) or rerun it"]))
+    drawn = drawn_cases(expand_sweeps(study))
+    absent = [f"case '{case}': results/cases/{case}/{name} missing; rerun the study (snakemake) before archiving"
+              for case in drawn for name in CASE_FILES if not (study_dir / "results" / "cases" / case / name).is_file()]
+    if absent:  # a study is never archived with a case its figures show missing (after the config's check:
+        # results of another config name their cause better)
+        raise ArchiveError("\n".join(absent))
+    bad = []
+    for case in archived_cases:  # the rule lucky.nc is written with, checked again (nothing NaN archived)
+        path = study_dir / "results" / "cases" / case / "lucky.nc"
+        try:
+            require_finite_lucky(open_dataset(path, f"case '{case}' lucky"), f"case '{case}': lucky file '{path}'")
+        except (OSError, ValueError) as err:
+            bad.append(str(err))
+    if bad:
+        raise ArchiveError("\n".join(bad + ["rerun the study (snakemake) before archiving"]))
     code_versions = set()
     for name in (n for n in files if n.endswith(".nc")):
         with netCDF4.Dataset(study_dir / name) as nc:

@@ -20,8 +20,8 @@ import json
 import logging
 from pathlib import Path
 
+from ..io.datasets import open_dataset, provenance, require_finite_lucky, write_dataset
 from ..io.hashing import sha256
-from ..io.datasets import open_dataset, provenance, write_dataset
 from .diameter import draw_quality_vs_diameter, quality_vs_diameter_data
 from .gallery import draw_psf_gallery, psf_gallery_data
 from .quality import (comparisons_data, draw_comparisons, draw_quality_vs_distance, draw_quality_vs_fraction,
@@ -70,6 +70,8 @@ def draw_figure(fig_id: str, settings: dict, lucky_paths, out_prefix: str) -> No
     none for geometry-only kinds); ``settings['case_configs']`` holds the cases' resolved configs."""
     typed = FigureSettings.from_dict(settings)
     datasets = [open_dataset(path, "lucky") for path in lucky_paths]
+    for path, ds in zip(lucky_paths, datasets):  # the rule lucky.nc is written with, checked again
+        require_finite_lucky(ds, f"lucky file '{path}'")
     if typed.kind not in REGISTRATION_KINDS:
         datasets = [baseline_registration(ds) for ds in datasets]
     make_data, draw = FIGURE_KINDS[typed.kind]

@@ -3,10 +3,14 @@
 Every file is written under a temporary name and renamed when complete, so a
 file with the final name is never half-written; a failed write names the file
 and what limits it (free disk, file size limit). A study file read by a job
-that is unreadable or holds NaN where it may not is set aside as
-``<name>.bad`` (``set_aside``), with an error naming it: the next run remakes
-it with the job that made it. Conventions: CF-1.8 style, ``units`` and
-``long_name`` on every variable; provenance in global attributes.
+of the workflow that is unreadable or holds NaN where it may not is set aside
+as ``<name>.bad`` (``set_aside``), with an error naming it: the next run remakes
+it with the job that made it (and reruns what depends on it). Only a workflow
+job does that (``STUDY_JOB``, set by ``workflow/rules/common.smk``), and only to
+a file in its study folder's ``results/``: a command run by hand (``luckyao
+export``, ``open_case``, ``open_figure``, ``draw``) never moves, renames or
+writes the files it reads, it names the problem. Conventions: CF-1.8 style,
+``units`` and ``long_name`` on every variable; provenance in global attributes.
 """
 
 import datetime
@@ -77,10 +81,59 @@ def require_finite(values, what: str, variable: str, index_names=()) -> None:
         raise ValueError(f"{what}: variable '{variable}' is not finite at {where}")
 
 
+STUDY_JOB = "LUCKYAO_STUDY_JOB"
+"""Set to ``1`` in the command of every job of the workflow (``live_run.STUDY_JOB``, named
+again here: this module, in every step's code inputs, imports no orchestration)."""
+
+
+def may_set_aside(path) -> bool:
+    """Whether ``path`` may be set aside here: only by a job of the workflow, and only a
+    file in its study folder's ``results/`` (the working folder's), after links resolved;
+    never a file a user handed to a command (``luckyao export README.md``)."""
+    if os.environ.get(STUDY_JOB) != "1":
+        return False
+    results = (Path.cwd() / "results").resolve()
+    try:
+        resolved = Path(path).resolve()
+    except (OSError, RuntimeError):
+        return False
+    return resolved.is_relative_to(results) and resolved != results
+
+
+def require_finite_lucky(ds: xr.Dataset, what: str) -> None:
+    """Raise ``ValueError`` naming ``what``, the variable and the first bad element's index
+    (with its label: ``detector=1 ('emccd')``) if a case's lucky results ``ds`` hold NaN or
+    an infinity where they may not: the rule ``lucky.nc`` is written with, and that every
+    reader of it checks again (figures, FITS export, archive). A noisy image can have no
+    positive flux (a few photons under read noise): its metrics are undefined (NaN), per
+    frame (``frame_*``) or integrated. Nothing else may be NaN: every value of the
+    noiseless detectors and every variable without a detector."""
+    noisy = (np.isfinite(ds["photons_per_frame"].values) if "photons_per_frame" in ds.coords
+             else np.zeros(ds.sizes.get("detector", 0), bool))
+    for name, var in ds.data_vars.items():
+        if var.dtype.kind != "f" or name.startswith("frame_"):
+            continue
+        bad = ~np.isfinite(var.values)
+        if "detector" in var.dims and noisy.any():
+            shape = [1] * var.ndim
+            shape[var.dims.index("detector")] = -1
+            bad &= ~noisy.reshape(shape)
+        if bad.any():
+            index = np.unravel_index(np.argmax(bad), bad.shape)
+            where = []
+            for dim, i in zip(var.dims, index):
+                label = ds[dim].values[i] if dim in ds.coords and ds[dim].ndim == 1 else None
+                where.append(f"{dim}={int(i)}" + (f" ('{label}')" if isinstance(label, str) else ""))
+            raise ValueError(f"{what}: variable '{name}' is not finite at {', '.join(where) or '()'}")
+
+
 def set_aside(path, problem: str) -> str:
     """Rename the bad study file ``path`` to ``<name>.bad`` (replacing an older one), so
-    that the next run remakes it; returns ``problem`` saying so."""
+    that the next run remakes it, when this process may (``may_set_aside``); returns
+    ``problem`` saying what was done. A file it may not set aside is left where it is."""
     path = Path(path)
+    if not may_set_aside(path):
+        return problem
     bad = path.with_name(path.name + ".bad")
     try:
         os.replace(path, bad)
@@ -135,7 +188,8 @@ def write_dataset(ds: xr.Dataset, path, compress: bool = True, allow_nan=()) -> 
 def open_dataset(path, what: str, allow_nan=None, remake: bool = True) -> xr.Dataset:
     """Open a study file fully into memory with a clear error if missing or corrupt. With
     ``allow_nan`` (a set), every float variable but those must be finite. A corrupt or
-    non-finite file is set aside for the next run to remake (``remake``)."""
+    non-finite file is set aside for the next run to remake (``remake``) when this is a
+    workflow job and the file its study's (``may_set_aside``); otherwise left as it is."""
     path = Path(path)
     if not path.exists():
         raise FileNotFoundError(f"{what} file '{path}' is missing; rerun the step that makes it")

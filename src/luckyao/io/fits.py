@@ -15,7 +15,7 @@ import os
 import numpy as np
 import xarray as xr
 
-from .datasets import open_dataset
+from .datasets import open_dataset, require_finite_lucky
 from .kinds import require_kind
 
 
@@ -136,6 +136,7 @@ def export_fits(lucky_path, out_path, detectors=None) -> int:
 
     lucky = open_dataset(lucky_path, "lucky")
     require_kind(lucky, "luckyao lucky imaging of case ", f"export of '{lucky_path}'")
+    require_finite_lucky(lucky, f"lucky file '{lucky_path}'")  # the rule it is written with, checked again
     if "registration" in lucky.dims:  # the baseline's images (cog)
         lucky = lucky.sel(registration="cog")
     primary = fits.PrimaryHDU()

@@ -5,12 +5,18 @@ Every Snakemake that parses this workflow holds a shared ``flock`` on
 ``.snakemake/luckyao-run.lock`` in its study folder from its start to its exit
 (``hold_shared``, called by ``workflow/rules/common.smk``), however it was
 started: ``bash run.sh study``, ``.venv/bin/snakemake`` by any path or symlink,
-``python -m snakemake``. The kernel releases the lock when the process ends, a
+``python -m snakemake``; and so does every job of the workflow, itself, from its
+start to its exit (``hold_job_lock``, called by ``luckyao.cli.main`` in a
+process marked a job, ``STUDY_JOB``), so that a job left running by a
+Snakemake killed alone (``kill -9`` of its main process) keeps the folder locked
+while it lives and writes. The kernel releases the lock when the process ends, a
 ``SIGKILL`` included. ``bash run.sh study`` (``main``) asks for it exclusively,
-without waiting: granted, no run uses the folder, so a killed run's Snakemake
-lock and its jobs' ``*.partial`` files are stale and removed; refused, a run is
-live and nothing is touched. The lock is then turned shared and kept across
-``exec`` into Snakemake, so the folder is never seen idle while it starts.
+without waiting: granted, no run and no job uses the folder, so a killed run's
+Snakemake lock and its jobs' ``*.partial`` files are stale and removed; refused,
+a run or an orphaned job is live and nothing is touched (Snakemake then refuses
+the folder by its own lock until the job has ended). The lock is then turned
+shared and kept across ``exec`` into Snakemake, so the folder is never seen idle
+while it starts.
 """
 
 import contextlib
@@ -37,6 +43,32 @@ def hold_shared(folder=".") -> int:
     return fd
 
 
+STUDY_JOB = "LUCKYAO_STUDY_JOB"
+"""Environment variable set to ``1`` in the command of every job of the workflow
+(``LUCKYAO`` in ``workflow/rules/common.smk``), whose working folder is then its study
+folder: such a process holds the study's run lock while it lives (``hold_job_lock``) and
+may set a bad input of the study aside (``datasets.set_aside``). Nothing else does either."""
+
+
+def is_study_job() -> bool:
+    """Whether this process is a job of the workflow (``STUDY_JOB``)."""
+    return os.environ.get(STUDY_JOB) == "1"
+
+
+_JOB_LOCK = None
+
+
+def hold_job_lock(folder=".") -> int:
+    """A job of the workflow (its working folder is the study folder): hold the folder's run
+    lock shared until this process exits, as its Snakemake does, so that the job keeps the
+    folder locked if that Snakemake is killed alone; returns the descriptor (kept open here,
+    not inherited by the processes the job starts)."""
+    global _JOB_LOCK
+    if _JOB_LOCK is None:
+        _JOB_LOCK = hold_shared(folder)
+    return _JOB_LOCK
+
+
 def study_folder(argv: list[str]) -> Path | None:
     """The study folder of a Snakemake command line, parsed by Snakemake's own parser
     (``-d DIR``, ``-dDIR``, ``--directory DIR``, ``--directory=DIR``, abbreviations,
@@ -59,7 +91,8 @@ def clean_if_idle(folder: Path, echo=print) -> int:
     try:
         fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
     except BlockingIOError:
-        echo(f"luckyao: a run of the workflow is using {folder}; its lock and files are left alone")
+        echo(f"luckyao: a run of the workflow, or a job of a killed one still running, is using {folder}; "
+             "its lock and files are left alone")
         fcntl.flock(fd, fcntl.LOCK_SH)
         return fd
     locks = [p for p in (folder / ".snakemake" / "locks").glob("*") if p.is_file()]

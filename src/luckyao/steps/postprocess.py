@@ -17,7 +17,7 @@ from ..lucky.accumulation import batch_mean_error
 from ..lucky.pipeline import ImageReference, run_lucky_methods
 from ..lucky.ranking import ExternalCriterion
 from ..seeds import target_seed
-from ..io.datasets import iter_frame_blocks, open_dataset, provenance, require_finite, write_dataset
+from ..io.datasets import iter_frame_blocks, open_dataset, provenance, require_finite_lucky, write_dataset
 from ..studyspec.lucky_settings import LuckySettings
 from .simulation import Replay
 from .screens import read_screens
@@ -118,13 +118,7 @@ def lucky_case(settings_config: dict, frames_path, telemetry_path, out_path, scr
     ds.attrs["case"] = settings.case_name
     ds.attrs["lucky_settings_json"] = settings.settings_json
     ds.attrs["telemetry_config_sha256"] = telemetry.attrs["config_sha256"]
-    # A noisy image can have no positive flux (a few photons under read noise): its metrics
-    # are undefined (NaN), per frame or integrated. Nothing else may be NaN: every value of
-    # the noiseless detectors and every variable without a detector.
-    noisy = [str(d) for d, n in zip(ds.detector.values, ds.photons_per_frame.values) if np.isfinite(n)]
-    for name, var in ds.data_vars.items():
-        if var.dtype.kind == "f" and not name.startswith("frame_"):
-            strict = var.drop_sel(detector=noisy) if "detector" in var.dims else var
-            require_finite(strict.values, f"file '{out_path}'", name, strict.dims)
+    # NaN only where a noisy image has no positive flux (the rule every reader checks again)
+    require_finite_lucky(ds, f"file '{out_path}'")
     write_dataset(ds, out_path, allow_nan=set(ds.data_vars))
     log.info("wrote %s: %s", out_path, json.dumps({k: int(v) for k, v in ds.sizes.items()}))

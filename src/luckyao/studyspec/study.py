@@ -256,6 +256,14 @@ def unused_cases(config: dict) -> list[str]:
     return [name for name in config["cases"] if name not in shown]
 
 
+def drawn_cases(config: dict) -> list[str]:
+    """Cases whose results a figure reads (sweeps expanded), sorted: ``all`` runs them and
+    exports their images; a finished study has every one's ``lucky.nc`` and ``telemetry.nc``
+    (the asterism figure is geometry only: its cases are not run for it)."""
+    return sorted({case for figure in config["figures"].values() if figure["kind"] != "asterism"
+                   for case in figure["cases"]})
+
+
 def read_study(*paths) -> dict:
     """Study YAML files, each read strictly (``yamlfile``: no alias bombs, duplicate keys or
     top level other than a mapping) and deep-merged over the one before (as Snakemake's
