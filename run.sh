@@ -1,7 +1,9 @@
 #!/usr/bin/env bash
-# luckyao: the two commands of the README.
+# luckyao: the two commands of the README, and two for developers.
 #   bash run.sh study [snakemake args...]   set up .venv, run the default study -> figures/
-#   bash run.sh test  [pytest args...]      set up .venv, run the test suite
+#   bash run.sh test  [pytest args...]      set up .venv, lint, run the test suite
+#   bash run.sh lint                        set up .venv, lint and format checks only
+#   bash run.sh docs  [sphinx args...]      set up .venv (docs extra), build docs/_build/html
 # Needs only Python >= 3.11 with pip; installs everything into .venv.
 set -euo pipefail
 cd "$(dirname "$0")"
@@ -59,6 +61,25 @@ setup() {
     fi
 }
 
+# The documentation's tools too (Sphinx and its extensions: pyproject's docs extra).
+setup_docs() {
+    setup
+    local stamp="$VENV/.luckyao-docs-installed"
+    if [ ! -f "$stamp" ] || [ pyproject.toml -nt "$stamp" ]; then
+        "$VENV/bin/python" -m pip install --quiet --no-compile -e ".[test,docs]"
+        touch "$stamp"
+    fi
+}
+
+# The habits CI keeps: the code linted and formatted (ruff), the rules formatted (snakefmt)
+# and linted (snakemake --lint, but for the two lints kept by design: tools/lint_rules.py).
+lint() {
+    "$VENV/bin/ruff" check src tests benchmarks docs tools
+    "$VENV/bin/ruff" format --check --quiet src tests benchmarks docs tools
+    "$VENV/bin/snakefmt" --check --quiet Snakefile workflow/rules
+    "$VENV/bin/python" tools/lint_rules.py
+}
+
 command="${1:-}"
 shift || true
 case "$command" in
@@ -72,10 +93,20 @@ case "$command" in
         ;;
     test)
         setup
+        lint
         exec "$VENV/bin/python" -m pytest "$@"
         ;;
+    lint)
+        setup
+        lint
+        ;;
+    docs)
+        setup_docs
+        # warnings are errors; the gallery's examples (docs/examples/) run during the build
+        exec "$VENV/bin/sphinx-build" -W --keep-going -b html docs docs/_build/html "$@"
+        ;;
     *)
-        echo "usage: bash run.sh study|test [args...]" >&2
+        echo "usage: bash run.sh study|test|lint|docs [args...]" >&2
         exit 2
         ;;
 esac

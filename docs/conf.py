@@ -1,4 +1,4 @@
-"""Sphinx configuration of the luckyao documentation: ``bash docs/build.sh``.
+"""Sphinx configuration of the luckyao documentation: ``bash run.sh docs``.
 
 Sphinx, as astropy, HCIPy and photutils: autodoc reads the package's docstrings (numpydoc
 reads their sections where they have them; the rest is prose), sphinx-gallery runs the

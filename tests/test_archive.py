@@ -24,6 +24,8 @@ from luckyao.cli import main
 from luckyao.studyspec.study import validate_study
 from luckyao.archive.verify import MEMBER_LIMIT_BYTES, compare_variables
 
+pytestmark = pytest.mark.workflow  # runs Snakemake, a study or the command line: -m 'not workflow' skips it
+
 REPO = Path(__file__).resolve().parents[1]
 TINY = REPO / "tests" / "data" / "tiny.yaml"
 

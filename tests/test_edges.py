@@ -13,6 +13,8 @@ from docutils.core import publish_parts
 from luckyao.studyspec.study import validate_study
 from luckyao.jobs.report import figure_caption, rst_text
 
+pytestmark = pytest.mark.workflow  # runs Snakemake, a study or the command line: -m 'not workflow' skips it
+
 TINY = Path(__file__).resolve().parent / "data" / "tiny.yaml"
 HOSTILE = ["<script>alert(1)</script>", "x``\n\n.. raw:: html\n\n   <script>alert(2)</script>\n\n``",
            "`click <javascript:alert(3)>`_", "*bold* :raw-html:`<b>` |sub| [#]_ \\"]

@@ -13,6 +13,8 @@ import yaml
 
 from luckyao.jobs.live_run import study_folder
 
+pytestmark = pytest.mark.workflow  # runs Snakemake, a study or the command line: -m 'not workflow' skips it
+
 REPO = Path(__file__).resolve().parents[1]
 TINY = REPO / "tests" / "data" / "tiny.yaml"
 

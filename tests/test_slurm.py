@@ -13,6 +13,8 @@ from pathlib import Path
 
 import pytest
 
+pytestmark = pytest.mark.workflow  # runs Snakemake, a study or the command line: -m 'not workflow' skips it
+
 REPO = Path(__file__).resolve().parents[1]
 SCRIPT = REPO / "tools" / "slurm-local.sh"
 SLURM_TOOLS = ("slurmctld", "slurmd", "sbatch", "squeue", "munged")

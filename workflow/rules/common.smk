@@ -116,6 +116,24 @@ def figure_settings(fig):
     return {**figure, "seed": STUDY["seed"], "case_configs": {c: CASES[c] for c in figure["cases"]}, **extra}
 
 
+def figure_settings_file(fig):
+    """The file that carries a figure's settings (its config, its cases' resolved configs, the
+    seed) to its job, so that they are not a (report-visible, very long) parameter. Named by
+    their hash and written here, while the workflow is parsed, when missing: new settings are
+    a new input, so the figure is redrawn exactly when they change; a file is never
+    rewritten, so a dry run of another config cannot change one a live run reads; and no job
+    is spent on it (a rule with a run directive costs a Snakemake start-up, ~6 s, each)."""
+    settings = figure_settings(fig)
+    path = f"results/figures/settings/{fig}_{sha256(settings)[:12]}.json"
+    if not os.path.exists(path):
+        with atomic_path(path) as partial:
+            partial.write_text(canonical_json(settings))
+    return path
+
+
+FIGURE_SETTINGS = {fig: figure_settings_file(fig) for fig in STUDY["figures"]}
+
+
 def figure_inputs(fig):
     """The cases' lucky datasets; none for the geometry-only asterism figure."""
     figure = STUDY["figures"][fig]
@@ -140,7 +158,7 @@ def kept_files(case):
 
 def simulation_files(case):
     """A case's ``telemetry.nc`` (and ``frames.nc`` when kept) and the kept products its
-    simulation reads, as rule ``simulate`` names them: screens, reconstructor, command
+    simulation reads (the inputs of ``simulate``): screens, reconstructor, command
     matrix, calibration, LGS slopes and the calibration they were measured with, and its LGS
     twin's (the twin's own simulation files)."""
     twin = LGS_TWIN[case]

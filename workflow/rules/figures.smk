@@ -3,24 +3,6 @@
 localrules: figure, export, all_cases
 
 
-def figure_settings_file(fig):
-    """The file that carries a figure's settings (its config, its cases' resolved configs, the
-    seed) to its job, so that they are not a (report-visible, very long) parameter. Named by
-    their hash and written here, while the workflow is parsed, when missing: new settings are
-    a new input, so the figure is redrawn exactly when they change; a file is never
-    rewritten, so a dry run of another config cannot change one a live run reads; and no job
-    is spent on it (a rule with a run directive costs a Snakemake start-up, ~6 s, each)."""
-    settings = figure_settings(fig)
-    path = f"results/figures/settings/{fig}_{sha256(settings)[:12]}.json"
-    if not os.path.exists(path):
-        with atomic_path(path) as partial:
-            partial.write_text(canonical_json(settings))
-    return path
-
-
-FIGURE_SETTINGS = {fig: figure_settings_file(fig) for fig in STUDY["figures"]}
-
-
 rule figure:
     """One figure and the tidy dataset it is drawn from."""
     input:
