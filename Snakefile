@@ -37,9 +37,9 @@ include: "workflow/rules/figures.smk"
 
 
 rule all:
+    default_target: True
     input:
         expand("figures/{fig}.{ext}", fig=list(STUDY["figures"]), ext=["pdf", "png", "html", "nc"]),
         expand("fits/{case}.fits", case=DRAWN_CASES),
         # what the drawn cases keep, so that one set aside or deleted is remade (kept_files)
         sorted({path for case in DRAWN_CASES for path in kept_files(case)}),
-    default_target: True

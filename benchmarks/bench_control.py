@@ -9,7 +9,6 @@ the DM slopes matrix, and the peak RSS (each pair in a fresh subprocess).
 Run: .venv/bin/python benchmarks/bench_control.py
 """
 
-
 from luckyao.threads import pin_one_thread  # no numpy: before it is imported
 
 pin_one_thread()
@@ -29,7 +28,9 @@ from luckyao.tomography.slopes import SlopeGeometry, slope_covariance  # noqa: E
 from luckyao.wfs.beacons import LgsConfig  # noqa: E402
 from luckyao.wfs.shack_hartmann import ShackHartmann  # noqa: E402
 
-BASE = load_study(Path(__file__).resolve().parents[1] / "config" / "config.yaml")[1]["noao_r0_13.5cm"]  # the base, resolved
+BASE = load_study(Path(__file__).resolve().parents[1] / "config" / "config.yaml")[1][
+    "noao_r0_13.5cm"
+]  # the base, resolved
 TELESCOPE = telescope_from(BASE["telescope"])
 PRIOR = tomography_from(BASE["tomography"]).prior  # the study's default system
 NOISE_RAD = tomography_from(BASE["tomography"]).noise_rms_rad
@@ -51,9 +52,11 @@ def build(n_sub: int, n_act: int) -> None:
     dm_slopes_matrix(dm, wfs, lgs.n_beacons)
     end = time.perf_counter()
     peak_gb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6
-    print(f"{n_sub}x{n_sub} WFS + {n_act}x{n_act} DM: {geometry.n_slopes} slopes, {dm.n_valid} actuators: "
-          f"S+Cholesky {factored - start:.1f} s, LTAO {ltao - factored:.1f} s, GLAO {glao - ltao:.1f} s, "
-          f"DM slopes {end - glao:.2f} s, total {end - start:.1f} s, peak RSS {peak_gb:.2f} GB")
+    print(
+        f"{n_sub}x{n_sub} WFS + {n_act}x{n_act} DM: {geometry.n_slopes} slopes, {dm.n_valid} actuators: "
+        f"S+Cholesky {factored - start:.1f} s, LTAO {ltao - factored:.1f} s, GLAO {glao - ltao:.1f} s, "
+        f"DM slopes {end - glao:.2f} s, total {end - start:.1f} s, peak RSS {peak_gb:.2f} GB"
+    )
 
 
 if __name__ == "__main__":

@@ -12,7 +12,6 @@ or with ``--frames-file`` a study's (e.g. ``results/cases/ltao_r0_13.5cm/frames.
 Run: .venv/bin/python benchmarks/bench_detector.py [--repeats 7] [--frames-file FRAMES.nc]
 """
 
-
 from luckyao.threads import pin_one_thread  # no numpy: before it is imported
 
 pin_one_thread()
@@ -29,8 +28,11 @@ from luckyao.lucky.detector import KeyedNoise  # noqa: E402
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=7)
-    parser.add_argument("--frames-file", default=None,
-                        help="a study's frames.nc: its first 256 frames (of target 0) instead of the generated ones")
+    parser.add_argument(
+        "--frames-file",
+        default=None,
+        help="a study's frames.nc: its first 256 frames (of target 0) instead of the generated ones",
+    )
     args = parser.parse_args()
     frames = cached_frames(GENERATED) if args.frames_file is None else study_frames(args.frames_file)
     chunk = KeyedNoise(frames.shape[-1], BLOCK).prepare(frames[:BLOCK])

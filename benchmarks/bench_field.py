@@ -49,8 +49,15 @@ REPLAY_PASSES = 1  # run_lucky reads a target selected and recentred by the star
 def loop_seconds(case: Case, screens, reconstructors, commands, calibration, imaged=None):
     """Seconds of the case's time loop (``TimeLoop.run``; the LGS chain's set-up not counted) and
     its telemetry."""
-    loop = TimeLoop(case, screens, 1, reconstructors=reconstructors, calibration=calibration, commands=commands,
-                    imaged_targets=imaged)
+    loop = TimeLoop(
+        case,
+        screens,
+        1,
+        reconstructors=reconstructors,
+        calibration=calibration,
+        commands=commands,
+        imaged_targets=imaged,
+    )
     start = time.perf_counter()
     telemetry = loop.run(lambda start, block: None)
     return time.perf_counter() - start, telemetry

@@ -30,7 +30,6 @@ Run: .venv/bin/python benchmarks/bench_lucky.py [--frames 256] [--cube 25000] [-
      [--frames-file FRAMES.nc] [--registrations cog windowed_cog peak xcorr]
 """
 
-
 from luckyao.threads import pin_one_thread  # no numpy: before it is imported
 
 pin_one_thread()
@@ -61,8 +60,9 @@ GENERATED = 256
 def sweep() -> list[Detector]:
     """The noiseless detector and the study's sweep (names as ``study.config.sweep_name``)."""
     photons = np.geomspace(10, 1e5, 9)
-    return [Detector("noiseless")] + [Detector(f"rn{rn:g}_{n:.3g}ph", float(n), rn)
-                                      for rn in (0.1, 1.0) for n in photons]
+    return [Detector("noiseless")] + [
+        Detector(f"rn{rn:g}_{n:.3g}ph", float(n), rn) for rn in (0.1, 1.0) for n in photons
+    ]
 
 
 def imager() -> Imager:
@@ -112,16 +112,20 @@ def study_frames(path: str) -> np.ndarray:
 
 def externals(n_frames: int) -> list[ExternalCriterion]:
     rng = np.random.default_rng(1)
-    return [ExternalCriterion(name, rng.uniform(50, 300, n_frames), False, "nm")
-            for name in ("lgs_rms", "lgs_residual_rms", "true_rms")]
+    return [
+        ExternalCriterion(name, rng.uniform(50, 300, n_frames), False, "nm")
+        for name in ("lgs_rms", "lgs_residual_rms", "true_rms")
+    ]
 
 
 def tiled(frames: np.ndarray, n_frames: int):
     """Chunks of ``BLOCK`` frames of an ``n_frames`` cube tiling ``frames``, none stored."""
+
     def iterate():
         for start in range(0, n_frames, BLOCK):
             index = np.arange(start, min(start + BLOCK, n_frames)) % len(frames)
             yield start, frames[index]
+
     return iterate
 
 
@@ -144,17 +148,31 @@ method_run.score_partial_sums = _timed_score
 def registration(name: str) -> Registration:
     """The registration method ``name`` for the benchmark's camera (as ``LuckySettings.registration_methods``)."""
     im = imager()
-    return Registration(name, im.diffraction_limited, 800e-9 / 4.2 / im.camera.pixel_scale_rad,
-                        search_px(im.camera.n_pixels, im.camera.pixel_scale_arcsec))
+    return Registration(
+        name,
+        im.diffraction_limited,
+        800e-9 / 4.2 / im.camera.pixel_scale_rad,
+        search_px(im.camera.n_pixels, im.camera.pixel_scale_arcsec),
+    )
 
 
 def run(frames: np.ndarray, n_frames: int, n_blocks: int = 0, methods=("cog",)) -> float:
     im = imager()
     SCORING.update(s=0.0, images=0)
     t0 = time.perf_counter()
-    run_lucky_methods(tiled(frames, n_frames), n_frames, sweep(), FRACTIONS, im.diffraction_limited_peak,
-                      im.camera.pixel_scale_arcsec, 1, criteria_external=externals(n_frames), n_blocks=n_blocks,
-                      progress_interval_s=60, registrations=[registration(name) for name in methods])
+    run_lucky_methods(
+        tiled(frames, n_frames),
+        n_frames,
+        sweep(),
+        FRACTIONS,
+        im.diffraction_limited_peak,
+        im.camera.pixel_scale_arcsec,
+        1,
+        criteria_external=externals(n_frames),
+        n_blocks=n_blocks,
+        progress_interval_s=60,
+        registrations=[registration(name) for name in methods],
+    )
     return time.perf_counter() - t0
 
 
@@ -164,10 +182,18 @@ def main() -> None:
     parser.add_argument("--cube", type=int, default=0, help="frames of a real run too (0: none)")
     parser.add_argument("--repeats", type=int, default=1)
     parser.add_argument("--blocks", type=int, default=0, help="time blocks (n_blocks of run_lucky; 0: none)")
-    parser.add_argument("--registrations", nargs="+", default=list(REGISTRATIONS), choices=REGISTRATIONS,
-                        help="registration methods, in one run (lucky.registration; default all four)")
-    parser.add_argument("--frames-file", default=None,
-                        help="a study's frames.nc: its first 256 frames (of target 0) instead of the generated ones")
+    parser.add_argument(
+        "--registrations",
+        nargs="+",
+        default=list(REGISTRATIONS),
+        choices=REGISTRATIONS,
+        help="registration methods, in one run (lucky.registration; default all four)",
+    )
+    parser.add_argument(
+        "--frames-file",
+        default=None,
+        help="a study's frames.nc: its first 256 frames (of target 0) instead of the generated ones",
+    )
     args = parser.parse_args()
     frames = cached_frames(GENERATED) if args.frames_file is None else study_frames(args.frames_file)
     n_det = len(sweep())
@@ -176,8 +202,10 @@ def main() -> None:
     for _ in range(args.repeats):
         t_half = run(frames, half, args.blocks, args.registrations)
         t_full = run(frames, args.frames, args.blocks, args.registrations)
-        print(f"scoring_s_{args.frames} {SCORING['s']:.2f} ({SCORING['images']} images, "
-              f"{SCORING['s'] / max(SCORING['images'], 1) * 1e3:.2f} ms each)")
+        print(
+            f"scoring_s_{args.frames} {SCORING['s']:.2f} ({SCORING['images']} images, "
+            f"{SCORING['s'] / max(SCORING['images'], 1) * 1e3:.2f} ms each)"
+        )
         per_frame = (t_full - t_half) / (args.frames - half)
         fixed = t_full - args.frames * per_frame
         print(f"seconds_{half} {t_half:.2f}")

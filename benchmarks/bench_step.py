@@ -39,10 +39,10 @@ from pathlib import Path  # noqa: E402
 import numpy as np  # noqa: E402
 
 from luckyao.ao.correction import OpenLoopCorrection  # noqa: E402
+from luckyao.jobs.resources import commands_bytes, frames_bytes, reconstructor_bytes, screens_bytes  # noqa: E402
 from luckyao.optics.imaging import Imager  # noqa: E402
 from luckyao.optics.propagation import Propagator  # noqa: E402
 from luckyao.optics.pupil import TiltRemover  # noqa: E402
-from luckyao.jobs.resources import commands_bytes, frames_bytes, reconstructor_bytes, screens_bytes  # noqa: E402
 from luckyao.steps.calibration import build_calibration  # noqa: E402
 from luckyao.steps.reconstructor import build_commands, build_reconstructors  # noqa: E402
 from luckyao.steps.screens import read_screens, write_screens  # noqa: E402
@@ -87,12 +87,22 @@ def stages(case: Case, screens, reconstructors, commands, calibration) -> dict:
     sensor, estimator = lgs_chain(case, screens, reconstructors, 1, calibration)
     surface = case.ao.deformable_mirror(case.telescope).grid_surface(imager.grid, imager.mask)
     clock = case.clock
-    correction = OpenLoopCorrection(*commands, surface, clock.exposure_steps, case.ao.delay_steps,
-                                        clock.steps_per_frame)
+    correction = OpenLoopCorrection(
+        *commands, surface, clock.exposure_steps, case.ao.delay_steps, clock.steps_per_frame
+    )
     e, spf = clock.exposure_steps, clock.steps_per_frame
     estimator.rms_nm(sensor.exposure_slopes(np.arange(e), case.layer_scales(np.arange(e))))
-    names = ["LGS propagation", "WFS", "reconstruction", "DM commands + residual", "science propagation",
-             "DM surface", "science image", "truth rms", "frame"]
+    names = [
+        "LGS propagation",
+        "WFS",
+        "reconstruction",
+        "DM commands + residual",
+        "science propagation",
+        "DM surface",
+        "science image",
+        "truth rms",
+        "frame",
+    ]
     spent = dict.fromkeys(names, 0.0)
     intensity = np.zeros((len(case.targets), imager.fft_size, imager.fft_size), dtype=np.float32)
     for frame in range(N_STEPS // spf):
@@ -101,7 +111,7 @@ def stages(case: Case, screens, reconstructors, commands, calibration) -> dict:
         slopes = []
         for i in clock.exposure_offsets():
             t0 = time.perf_counter()
-            sensor.sample(steps[i:i + e], layer_scales[i:i + e])
+            sensor.sample(steps[i : i + e], layer_scales[i : i + e])
             t1 = time.perf_counter()
             slopes.append(sensor.slopes())
             spent["LGS propagation"] += t1 - t0
@@ -140,8 +150,14 @@ def whole_loop_ms(case: Case, screens, reconstructors, commands, calibration) ->
     short run compiles what the case needs."""
     seconds = []
     for frames in (4, 4, case.n_frames):
-        loop = TimeLoop(dataclasses.replace(case, n_frames=frames), screens, 1, reconstructors=reconstructors,
-                        calibration=calibration, commands=commands)
+        loop = TimeLoop(
+            dataclasses.replace(case, n_frames=frames),
+            screens,
+            1,
+            reconstructors=reconstructors,
+            calibration=calibration,
+            commands=commands,
+        )
         start = time.perf_counter()
         loop.run(lambda start, block: None)
         seconds.append(time.perf_counter() - start)
@@ -187,8 +203,9 @@ def peak_rss_gb() -> float:
 def sized_study(config_path: str, diameter_m: float) -> tuple[dict, dict]:
     """The study and the default AO case at ``diameter_m`` (size-dependent keys derived)."""
     study, _ = load_study(config_path)
-    sized = dict(study, cases={"sized": {"telescope": {"diameter_m": diameter_m}, "ao": {"mode": "ltao"}}},
-                 figures={}, sweeps={})
+    sized = dict(
+        study, cases={"sized": {"telescope": {"diameter_m": diameter_m}, "ao": {"mode": "ltao"}}}, figures={}, sweeps={}
+    )
     return study, validate_study(sized)["sized"]
 
 
@@ -221,9 +238,11 @@ def measure_loop(config_path: str, diameter_m: float, folder: str, repeats: int)
     write_screens(spec, Path(folder) / "s.npy", Path(folder) / "s.nc", {})
     screens = read_screens(Path(folder) / "s.npy", Path(folder) / "s.nc")
     np.asarray(screens.flat).sum()  # page the memory-mapped screens in
-    products_ = (np.load(Path(folder) / "reconstructors.npy"),
-                 (np.load(Path(folder) / "command_matrix.npy"), np.load(Path(folder) / "dm_slopes.npy")),
-                 xr.load_dataset(Path(folder) / "calibration.nc"))
+    products_ = (
+        np.load(Path(folder) / "reconstructors.npy"),
+        (np.load(Path(folder) / "command_matrix.npy"), np.load(Path(folder) / "dm_slopes.npy")),
+        xr.load_dataset(Path(folder) / "calibration.nc"),
+    )
     case = Case.from_config(config)
     runs = [whole_loop_ms(case, screens, *products_) for _ in range(repeats)]
     return {"ms_per_step": float(np.median(runs)), "ms_per_step_runs": runs, "loop_peak_gb": peak_rss_gb()}
@@ -232,17 +251,22 @@ def measure_loop(config_path: str, diameter_m: float, folder: str, repeats: int)
 def case_files_gb(config_path: str, diameter_m: float) -> dict:
     """The files of the case at the study's default duration (the study's estimates) [GB]."""
     study, config = sized_study(config_path, diameter_m)
-    return {"frames_gb": frames_bytes(config) / 1e9, "screens_gb": screens_bytes(turbulence_spec(study, config)) / 1e9,
-            "reconstructor_gb": reconstructor_bytes(reconstructor_spec(config)) / 1e9,
-            "commands_gb": commands_bytes(commands_spec(config)) / 1e9,
-            "n_subapertures": config["wfs"]["n_subapertures"], "n_actuators": config["ao"]["n_actuators"],
-            "camera_pixels": config["camera"]["n_pixels"]}
+    return {
+        "frames_gb": frames_bytes(config) / 1e9,
+        "screens_gb": screens_bytes(turbulence_spec(study, config)) / 1e9,
+        "reconstructor_gb": reconstructor_bytes(reconstructor_spec(config)) / 1e9,
+        "commands_gb": commands_bytes(commands_spec(config)) / 1e9,
+        "n_subapertures": config["wfs"]["n_subapertures"],
+        "n_actuators": config["ao"]["n_actuators"],
+        "camera_pixels": config["camera"]["n_pixels"],
+    }
 
 
 def child(stage: str, *args) -> dict:
     """Run one stage in a fresh process (its own peak memory); its last stdout line is JSON."""
-    done = subprocess.run([sys.executable, __file__, "--stage", stage, *map(str, args)], check=True,
-                          capture_output=True, text=True)
+    done = subprocess.run(
+        [sys.executable, __file__, "--stage", stage, *map(str, args)], check=True, capture_output=True, text=True
+    )
     return json.loads(done.stdout.strip().splitlines()[-1])
 
 
@@ -255,22 +279,34 @@ def main_sizes(config_path: str, diameters, repeats: int) -> None:
             row.update(child("loop", config_path, diameter_m, folder, repeats))
         rows[diameter_m] = row
         print("size " + json.dumps(row), flush=True)
-    print("| D [m] | WFS | DM | camera px | ms/step (LTAO, 1 core) | loop peak RSS [GB] | reconstructor [s] | "
-          "command matrix [s] | their peak RSS [GB] | frames [GB] | screens [GB] |")
+    print(
+        "| D [m] | WFS | DM | camera px | ms/step (LTAO, 1 core) | loop peak RSS [GB] | reconstructor [s] | "
+        "command matrix [s] | their peak RSS [GB] | frames [GB] | screens [GB] |"
+    )
     print("|---|---|---|---|---|---|---|---|---|---|---|")
     for d, r in rows.items():
-        print(f"| {d:g} | {r['n_subapertures']} | {r['n_actuators']} | {r['camera_pixels']} | {r['ms_per_step']:.2f} | "
-              f"{r['loop_peak_gb']:.2f} | {r['reconstructor_s']:.1f} | {r['commands_s']:.1f} | "
-              f"{r['products_peak_gb']:.2f} | {r['frames_gb']:.2f} | {r['screens_gb']:.2f} |")
+        print(
+            f"| {d:g} | {r['n_subapertures']} | {r['n_actuators']} | {r['camera_pixels']} | {r['ms_per_step']:.2f} | "
+            f"{r['loop_peak_gb']:.2f} | {r['reconstructor_s']:.1f} | {r['commands_s']:.1f} | "
+            f"{r['products_peak_gb']:.2f} | {r['frames_gb']:.2f} | {r['screens_gb']:.2f} |"
+        )
     if len(rows) > 1:
         print_power_laws(list(rows.values()), PROJECTED_DIAMETER_M)
-        print(f"the study's size estimates at {PROJECTED_DIAMETER_M:g} m: "
-              + json.dumps(case_files_gb(config_path, PROJECTED_DIAMETER_M)))
+        print(
+            f"the study's size estimates at {PROJECTED_DIAMETER_M:g} m: "
+            + json.dumps(case_files_gb(config_path, PROJECTED_DIAMETER_M))
+        )
 
 
-SCALED = {"ms_per_step": "ms/step", "loop_peak_gb": "loop peak RSS [GB]", "reconstructor_s": "reconstructor [s]",
-          "commands_s": "command matrix [s]", "products_peak_gb": "their peak RSS [GB]", "frames_gb": "frames [GB]",
-          "screens_gb": "screens [GB]"}
+SCALED = {
+    "ms_per_step": "ms/step",
+    "loop_peak_gb": "loop peak RSS [GB]",
+    "reconstructor_s": "reconstructor [s]",
+    "commands_s": "command matrix [s]",
+    "products_peak_gb": "their peak RSS [GB]",
+    "frames_gb": "frames [GB]",
+    "screens_gb": "screens [GB]",
+}
 PROJECTED_DIAMETER_M = 39.0
 """The ELT's diameter: the size the power laws are projected to."""
 
@@ -288,7 +324,7 @@ def print_power_laws(rows: list[dict], projected_m: float) -> None:
     print("|---|---|---|")
     for key, label in SCALED.items():
         a, b = power_law(diameters, [r[key] for r in rows])
-        print(f"| {label} | {b:.2f} | {a * projected_m ** b:.3g} |")
+        print(f"| {label} | {b:.2f} | {a * projected_m**b:.3g} |")
 
 
 if __name__ == "__main__":

@@ -11,7 +11,6 @@ subprocess so its peak RSS is its own).
 Run: .venv/bin/python benchmarks/bench_wfs_tomography.py
 """
 
-
 from luckyao.threads import pin_one_thread  # no numpy: before it is imported
 
 pin_one_thread()
@@ -35,7 +34,9 @@ from luckyao.wfs.beacons import LgsConfig  # noqa: E402
 from luckyao.wfs.centroiders import centroids_rad  # noqa: E402
 from luckyao.wfs.sensor import measure_slopes  # noqa: E402
 
-BASE = load_study(Path(__file__).resolve().parents[1] / "config" / "config.yaml")[1]["noao_r0_13.5cm"]  # the base, resolved
+BASE = load_study(Path(__file__).resolve().parents[1] / "config" / "config.yaml")[1][
+    "noao_r0_13.5cm"
+]  # the base, resolved
 TELESCOPE = telescope_from(BASE["telescope"])
 PRIOR = tomography_from(BASE["tomography"]).prior  # the study's default system
 NOISE_RAD = tomography_from(BASE["tomography"]).noise_rms_rad
@@ -63,9 +64,11 @@ def build(n_sub: int) -> None:
     target_reconstructor(PRIOR, geometry, NOISE_RAD, points, cholesky_lower=factor)
     end = time.perf_counter()
     peak_gb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6
-    print(f"build {n_sub}x{n_sub}: {geometry.n_slopes} slopes, {len(points)} target points: "
-          f"S+Cholesky {middle - start:.1f} s, target R {end - middle:.1f} s, "
-          f"total {end - start:.1f} s, peak RSS {peak_gb:.2f} GB")
+    print(
+        f"build {n_sub}x{n_sub}: {geometry.n_slopes} slopes, {len(points)} target points: "
+        f"S+Cholesky {middle - start:.1f} s, target R {end - middle:.1f} s, "
+        f"total {end - start:.1f} s, peak RSS {peak_gb:.2f} GB"
+    )
 
 
 def per_step() -> None:
@@ -85,9 +88,11 @@ def per_step() -> None:
     t_images = best_ms(lambda: sh.exposure_images(wfs, downlink, 500e-9, elongation, uplink))
     images = sh.exposure_images(wfs, downlink, 500e-9, elongation, uplink)
     t_rec = best_ms(lambda: lgs_rms_nm(rec, slopes), number=200)
-    print(f"WFS 4 LGS x 8x8 ({wfs.n_valid} valid, n_s={wfs.samples_per_subaperture}, "
-          f"M={wfs.fft_size}): {t_wfs:.2f} ms per 5 ms exposure (images {t_images:.2f}) "
-          f"= {t_wfs / 2:.2f} ms per 2.5 ms step")
+    print(
+        f"WFS 4 LGS x 8x8 ({wfs.n_valid} valid, n_s={wfs.samples_per_subaperture}, "
+        f"M={wfs.fft_size}): {t_wfs:.2f} ms per 5 ms exposure (images {t_images:.2f}) "
+        f"= {t_wfs / 2:.2f} ms per 2.5 ms step"
+    )
     # stages of one exposure (private kernels; ms per exposure, all chunks and steps)
     plan = sh._exposure_plan(wfs, lgs.n_beacons, 2)
     ratio = np.float32(500e-9 / wfs.wavelength_m)
@@ -109,8 +114,7 @@ def per_step() -> None:
     pixel = wk._generated("pixels", lanes, n_lags, n_pix)
     phase, steps = downlink.reshape(-1), 2 * n_chunks
     stages = {
-        "uplink OTF": best_ms(lambda: plan.uplink_otf(uplink.reshape(-1), ratio, plan.launch_amp,
-                                                      spot)),
+        "uplink OTF": best_ms(lambda: plan.uplink_otf(uplink.reshape(-1), ratio, plan.launch_amp, spot)),
         "phase gather": steps * best_ms(lambda: wk.gather(phase, plan.sources[0], n, n_s, phi)),
         "fields + y DFTs": steps * best_ms(lambda: columns(phi, ratio, plan.amp[0], g)),
         "x autocorrelation": steps * best_ms(lambda: correlate(g, h, True)),
@@ -120,8 +124,10 @@ def per_step() -> None:
     }
     stages["driver + Python"] = t_wfs - sum(stages.values())
     print("  ms per exposure: " + ", ".join(f"{name} {t:.3f}" for name, t in stages.items()))
-    print(f"reconstruction + rms ({rec.shape[0]} points x {rec.shape[1]} slopes): "
-          f"{t_rec:.3f} ms per exposure = {t_rec / 2:.3f} ms per step")
+    print(
+        f"reconstruction + rms ({rec.shape[0]} points x {rec.shape[1]} slopes): "
+        f"{t_rec:.3f} ms per exposure = {t_rec / 2:.3f} ms per step"
+    )
     print(f"WFS + reconstruction: {(t_wfs + t_rec) / 2:.2f} ms per step")
 
 

@@ -69,16 +69,17 @@ html_static_path = ["_static"]
 html_css_files = ["luckyao.css"]
 html_show_sourcelink = False
 # pages without sub-pages: no (empty) left sidebar, the width for their tables
-html_sidebars = {page: [] for page in ("index", "configuration", "results", "validation", "performance",
-                                       "api", "changelog")}
+html_sidebars = {
+    page: [] for page in ("index", "configuration", "results", "validation", "performance", "api", "changelog")
+}
 
 
 sphinx_gallery_conf = {
     "examples_dirs": ["examples"],
     "gallery_dirs": ["auto_examples"],
-    "filename_pattern": r".*\.py$",   # run every example
+    "filename_pattern": r".*\.py$",  # run every example
     "within_subsection_order": "FileNameSortKey",
-    "reset_argv": "gallery_hooks.reset_argv",   # docs/_ext/gallery_hooks.py
+    "reset_argv": "gallery_hooks.reset_argv",  # docs/_ext/gallery_hooks.py
     "download_all_examples": False,
     "plot_gallery": "True",
     "abort_on_example_error": True,

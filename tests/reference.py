@@ -17,15 +17,15 @@ from luckyao.tomography.reconstructor import apply_inverse
 from luckyao.tomography.slopes import SlopeGeometry, cross_covariance
 
 
-def apply_detector(frames_unit_flux: np.ndarray, detector: Detector,
-                   rng: np.random.Generator) -> np.ndarray:
+def apply_detector(frames_unit_flux: np.ndarray, detector: Detector, rng: np.random.Generator) -> np.ndarray:
     """Detected frames [electron] (float32, same shape) from unit-flux frames (..., n, n).
 
     Each pixel: ``Poisson(N * I) + sigma * Normal(0, 1)``, ``N`` =
     ``detector.photons_per_frame``, ``sigma`` = ``detector.read_noise_e``; so the mean
     is ``N I`` and the variance ``N I + sigma^2``. Negative unit-flux values (rounding)
     are clipped to 0. A noiseless detector returns a float32 copy of the unit-flux
-    frames (not scaled) and draws nothing from ``rng``. The input is never modified. The reference of :class:`luckyao.lucky.detector.KeyedNoise`.
+    frames (not scaled) and draws nothing from ``rng``. The input is never modified. The reference of
+    :class:`luckyao.lucky.detector.KeyedNoise`.
 
     Independent Poisson pixels are drawn in one of two equivalent ways (a Poisson
     process: the total ``K ~ Poisson(N sum I)`` and, given ``K``, photons
@@ -45,13 +45,11 @@ def apply_detector(frames_unit_flux: np.ndarray, detector: Detector,
         electrons = rng.poisson(frames.astype(np.float64) * detector.photons_per_frame)
         electrons = electrons.astype(np.float32)
     if detector.read_noise_e > 0:
-        electrons += np.float32(detector.read_noise_e) * rng.standard_normal(
-            electrons.shape, dtype=np.float32)
+        electrons += np.float32(detector.read_noise_e) * rng.standard_normal(electrons.shape, dtype=np.float32)
     return electrons
 
 
-def _poisson_by_photons(frames: np.ndarray, photons: float,
-                        rng: np.random.Generator) -> np.ndarray:
+def _poisson_by_photons(frames: np.ndarray, photons: float, rng: np.random.Generator) -> np.ndarray:
     """Independent Poisson counts (float32) of means ``photons * frames`` (..., n, n), frames >= 0.
 
     Per frame ``j``: ``K_j ~ Poisson(photons * sum frames_j)`` photons, each placed at the
@@ -77,8 +75,7 @@ def _poisson_by_photons(frames: np.ndarray, photons: float,
     return counts.astype(np.float32).reshape(shape)
 
 
-def detect(frames_unit_flux: np.ndarray, detector: Detector, seed: int,
-           first_frame: int = 0) -> np.ndarray:
+def detect(frames_unit_flux: np.ndarray, detector: Detector, seed: int, first_frame: int = 0) -> np.ndarray:
     """Detected frames (float32) of frames ``first_frame..`` (k, n, n) with the keyed
     streams of :class:`KeyedNoise` (a float32 copy for a noiseless detector)."""
     frames = np.asarray(frames_unit_flux)
@@ -99,8 +96,8 @@ def shift_frames(frames: np.ndarray, shifts_px: np.ndarray) -> np.ndarray:
     shifts_px = np.asarray(shifts_px, dtype=np.int64).reshape(k, 2)
     out = np.empty_like(frames)
     for frame, moved, (sy, sx) in zip(frames, out, shifts_px % (ny, nx)):
-        moved[sy:, sx:], moved[sy:, :sx] = frame[:ny - sy, :nx - sx], frame[:ny - sy, nx - sx:]
-        moved[:sy, sx:], moved[:sy, :sx] = frame[ny - sy:, :nx - sx], frame[ny - sy:, nx - sx:]
+        moved[sy:, sx:], moved[sy:, :sx] = frame[: ny - sy, : nx - sx], frame[: ny - sy, nx - sx :]
+        moved[:sy, sx:], moved[:sy, :sx] = frame[ny - sy :, : nx - sx], frame[ny - sy :, nx - sx :]
     return out
 
 
@@ -115,8 +112,9 @@ def shift_and_add(frames: np.ndarray) -> np.ndarray:
     return shift_frames(frames, shifts).sum(axis=0, dtype=np.float64)
 
 
-def d50_arcsec(images: np.ndarray, pixel_scale_arcsec: float,
-               encircled_energy: EncircledEnergy | None = None) -> np.ndarray:
+def d50_arcsec(
+    images: np.ndarray, pixel_scale_arcsec: float, encircled_energy: EncircledEnergy | None = None
+) -> np.ndarray:
     """Diameter [arcsec] of the circle, centred on the centre of gravity, holding half the flux.
 
     ``images`` (..., n, n); returns shape (...). Exact for band-limited periodic
@@ -128,13 +126,19 @@ def d50_arcsec(images: np.ndarray, pixel_scale_arcsec: float,
     return d50_from_radius(ee.radius_px(images), pixel_scale_arcsec)
 
 
-def layer_reconstructor(prior: TurbulencePrior, geometry: SlopeGeometry, layer_index: int,
-                        points_xy_m: np.ndarray, cholesky_lower: np.ndarray,
-                        n_edge: int = 2) -> np.ndarray:
+def layer_reconstructor(
+    prior: TurbulencePrior,
+    geometry: SlopeGeometry,
+    layer_index: int,
+    points_xy_m: np.ndarray,
+    cholesky_lower: np.ndarray,
+    n_edge: int = 2,
+) -> np.ndarray:
     """Virtual-DM estimate (n_points, n_slopes) [m / rad] of layer ``layer_index``
     at layer coordinates ``points_xy_m`` [m]."""
-    cross = cross_covariance(prior, geometry, points_xy_m, (0.0, 0.0), source_height_m=0.0,
-                             layer_indices=[layer_index], n_edge=n_edge)
+    cross = cross_covariance(
+        prior, geometry, points_xy_m, (0.0, 0.0), source_height_m=0.0, layer_indices=[layer_index], n_edge=n_edge
+    )
     return apply_inverse(cholesky_lower, cross)
 
 
@@ -143,9 +147,13 @@ def elongation_length_rad(baseline_m, depth_m: float, beacon_height_m: float):
     return np.asarray(baseline_m, dtype=float) * depth_m / beacon_height_m**2
 
 
-def reference_exposure_images(wfs: sh.ShackHartmann, downlink_phase_rad: np.ndarray,
-                              phase_wavelength_m: float, elongation: np.ndarray | None = None,
-                              uplink_phase_rad: np.ndarray | None = None) -> np.ndarray:
+def reference_exposure_images(
+    wfs: sh.ShackHartmann,
+    downlink_phase_rad: np.ndarray,
+    phase_wavelength_m: float,
+    elongation: np.ndarray | None = None,
+    uplink_phase_rad: np.ndarray | None = None,
+) -> np.ndarray:
     """:func:`luckyao.wfs.shack_hartmann.exposure_images` by the step-by-step public functions (slow, for tests)."""
     downlink = np.asarray(downlink_phase_rad)
     if downlink.ndim != 4:

@@ -17,7 +17,8 @@ def lucky_dataset(value: float, n_blocks: int, **per_frame) -> xr.Dataset:
         data[metric] = (dims, np.full(shape, value), {"units": "1", "long_name": metric})
         data[f"{metric}_error"] = (dims, np.full(shape, 0.01), {"units": "1", "long_name": "error"})
     for name, values in per_frame.items():
-        data[name] = (("target", "detector", "frame"), values[None, None, :]) if name == "frame_strehl" \
-            else (("frame",), values)
+        data[name] = (
+            (("target", "detector", "frame"), values[None, None, :]) if name == "frame_strehl" else (("frame",), values)
+        )
     data["strehl_block"] = (("block",), np.zeros(n_blocks))
     return xr.Dataset(data, coords={"criterion": CRITERIA, "fraction": FRACTIONS, "detector": ["noiseless"]})

@@ -42,8 +42,9 @@ GROUND_S = 0.8
 
 def _screens(spec: dict, seed: int) -> ScreenSet:
     specs = strip_specs(TurbulenceSpec.from_config(spec))
-    return ScreenSet.from_screens(specs, [strip_screen(s, spec["outer_scale_m"], np.random.default_rng([seed, i]))
-                                          for i, s in enumerate(specs)])
+    return ScreenSet.from_screens(
+        specs, [strip_screen(s, spec["outer_scale_m"], np.random.default_rng([seed, i])) for i, s in enumerate(specs)]
+    )
 
 
 def _batch_se(x: np.ndarray, n_batches: int = 6) -> float:
@@ -78,8 +79,9 @@ class _Setup:
 
     def simulate(self, cfg: dict, commands, frames: list | None = None):
         write = (lambda start, f: None) if frames is None else (lambda start, f: frames.append(f.copy()))
-        return TimeLoop(Case.from_config(cfg), self.screens, 5, reconstructors=self.reconstructors,
-                        commands=commands).run(write)
+        return TimeLoop(
+            Case.from_config(cfg), self.screens, 5, reconstructors=self.reconstructors, commands=commands
+        ).run(write)
 
     def run(self, name: str, duration_s: float, mode: str = "ltao", **ao):
         if name not in self._runs:
@@ -105,13 +107,20 @@ def nine(study):
 def ground(study):
     config, cases = study
     step_s = cases["ltao_r0_13.5cm"]["time_step_s"]
-    base = deep_merge(cases["ltao_r0_13.5cm"], {
-        "duration_s": GROUND_S,
-        "atmosphere": {"height_m": [0.0], "cn2_fraction": [1.0], "wind_direction_deg": [0.0],
-                       "wind_speed_m_s": [2 * PIXEL_M / step_s]},  # 2 screen samples per step along +x
-        "tomography": {"layer_heights_m": [0.0], "layer_cn2_fraction": [1.0]},
-        "ao": {"glao_max_height_m": 100.0},
-    })
+    base = deep_merge(
+        cases["ltao_r0_13.5cm"],
+        {
+            "duration_s": GROUND_S,
+            "atmosphere": {
+                "height_m": [0.0],
+                "cn2_fraction": [1.0],
+                "wind_direction_deg": [0.0],
+                "wind_speed_m_s": [2 * PIXEL_M / step_s],
+            },  # 2 screen samples per step along +x
+            "tomography": {"layer_heights_m": [0.0], "layer_cn2_fraction": [1.0]},
+            "ao": {"glao_max_height_m": 100.0},
+        },
+    )
     spec = dict(turbulence_spec(config, base), duration_s=GROUND_S + 0.05, max_pixel_m=PIXEL_M)
     setup = _Setup(base, _screens(spec, 7))
     (s,) = setup.screens.specs
@@ -141,7 +150,7 @@ def _tip_tilt_fraction(surfaces: np.ndarray, x: np.ndarray, y: np.ndarray) -> np
 # 1 -------------------------------------------------------------------------------------------
 @pytest.mark.parametrize("mode", ["ltao", "glao"])
 def test_dm_adds_no_tip_tilt(nine, mode):
-    """"The DM adds no tip-tilt."
+    """ "The DM adds no tip-tilt."
 
     Metric: rms of the surface's least-squares tip/tilt over the rms of the
     piston-removed surface. The command matrix removes tip/tilt over its fitting
@@ -163,8 +172,10 @@ def test_dm_adds_no_tip_tilt(nine, mode):
     dm = case.ao.deformable_mirror(case.telescope)
     _, _, points = pupil_points(case.telescope, dm.pitch_m / 4)
     on_fit = _tip_tilt_fraction((dm.influence_matrix(points[:, 0], points[:, 1]) @ commands).T, *points.T)
-    print(f"{mode}: tip-tilt fraction on fit points max {on_fit.max():.1e}; on the science samples "
-          f"median {np.median(fraction):.4f}, max {fraction.max():.4f}")
+    print(
+        f"{mode}: tip-tilt fraction on fit points max {on_fit.max():.1e}; on the science samples "
+        f"median {np.median(fraction):.4f}, max {fraction.max():.4f}"
+    )
     assert on_fit.max() <= 1e-5, on_fit.max()
     assert np.median(fraction) <= 0.01 and fraction.max() <= 0.03, (np.median(fraction), fraction.max())
     # the metric sees tip-tilt when it is there: surfaces of random commands carry plenty of it
@@ -174,7 +185,7 @@ def test_dm_adds_no_tip_tilt(nine, mode):
 
 # 2 -------------------------------------------------------------------------------------------
 def test_flat_dm_changes_nothing(nine, study):
-    """"With ao.mode: none nothing changes" and "the pseudo-closed-loop residual
+    """ "With ao.mode: none nothing changes" and "the pseudo-closed-loop residual
     equals the open-loop value when the DM is off".
 
     Same screens, same LGS chain: the case with ``ao.mode: none`` (no commands)
@@ -190,8 +201,9 @@ def test_flat_dm_changes_nothing(nine, study):
     matrix, dm_slopes = nine.commands("ltao")
     frames_none, frames_flat = [], []
     none = nine.simulate(none_cfg, None, frames_none)
-    flat = nine.simulate(dict(nine.config(mode="ltao"), duration_s=duration),
-                         (np.zeros_like(matrix), dm_slopes), frames_flat)
+    flat = nine.simulate(
+        dict(nine.config(mode="ltao"), duration_s=duration), (np.zeros_like(matrix), dm_slopes), frames_flat
+    )
     assert "lgs_residual_rms_nm" not in none
     np.testing.assert_array_equal(np.concatenate(frames_none, 1), np.concatenate(frames_flat, 1))
     for name in ("true_rms_nm", "lgs_rms_nm", "axis_strehl"):
@@ -208,15 +220,17 @@ def test_no_ao_case_takes_its_lgs_telemetry_from_its_twin(nine, study, tmp_path)
     same LGS chain (``config.lgs_twin``: the sensor is open loop, it never sees the DM) and
     only image: its telemetry and frames are then bit-identical to measuring them itself.
     The twin's file is refused when its LGS chain differs (here a 16x16 WFS) or its seed."""
-    from luckyao.studyspec.products import lgs_twin
     from luckyao.io.datasets import provenance, write_dataset
     from luckyao.steps.simulation import twin_lgs_rms_nm
+    from luckyao.studyspec.products import lgs_twin
 
     config, cases = study
     assert lgs_twin(config, cases, "noao_r0_15cm") == "ltao_r0_15cm"
     assert lgs_twin(config, cases, "ltao_r0_15cm") is None  # AO cases measure their own
-    assert lgs_twin(config, {"noao_r0_15cm": cases["noao_r0_15cm"], "ltao_wfs16": cases["ltao_wfs16"]},
-                    "noao_r0_15cm") is None  # another WFS: other slopes
+    assert (
+        lgs_twin(config, {"noao_r0_15cm": cases["noao_r0_15cm"], "ltao_wfs16": cases["ltao_wfs16"]}, "noao_r0_15cm")
+        is None
+    )  # another WFS: other slopes
 
     duration = 0.2
     none_cfg = dict(nine.config(mode="none"), duration_s=duration)
@@ -227,8 +241,9 @@ def test_no_ao_case_takes_its_lgs_telemetry_from_its_twin(nine, study, tmp_path)
     path = tmp_path / "twin.nc"
     twin.attrs.update(provenance("twin", ltao_cfg, 5))
     write_dataset(twin, path)
-    given = TimeLoop(Case.from_config(none_cfg), nine.screens, 5, lgs_rms_nm=twin_lgs_rms_nm(path, none_cfg, 5)
-                     ).run(lambda start, f: frames_given.append(f.copy()))
+    given = TimeLoop(Case.from_config(none_cfg), nine.screens, 5, lgs_rms_nm=twin_lgs_rms_nm(path, none_cfg, 5)).run(
+        lambda start, f: frames_given.append(f.copy())
+    )
     assert given.identical(own)
     np.testing.assert_array_equal(np.concatenate(frames_given, 1), np.concatenate(frames_own, 1))
     with pytest.raises(ValueError, match="seed 6"):
@@ -248,8 +263,10 @@ def test_ao_cases_replay_the_slopes_their_lgs_chain_measured_once(nine, study, t
     from luckyao.studyspec.products import lgs_chain_config, slopes_key, slopes_spec
 
     config, cases = study
-    shared = {slopes_key(slopes_spec(config, cases[name]))
-              for name in ("ltao_r0_13.5cm", "glao_r0_13.5cm", "ltao_dm5", "ltao_field")}
+    shared = {
+        slopes_key(slopes_spec(config, cases[name]))
+        for name in ("ltao_r0_13.5cm", "glao_r0_13.5cm", "ltao_dm5", "ltao_field")
+    }
     assert len(shared) == 1
     assert slopes_key(slopes_spec(config, cases["ltao_wfs16"])) not in shared  # another WFS: other slopes
     assert slopes_spec(config, cases["noao_r0_13.5cm"]) is None  # no AO: lgs_rms from its twin (2b)
@@ -266,9 +283,14 @@ def test_ao_cases_replay_the_slopes_their_lgs_chain_measured_once(nine, study, t
         built = build_commands(commands_spec(cfg))
         commands, frames_own, frames_replayed = (built.command_matrix.values, built.dm_slopes.values), [], []
         own = nine.simulate(cfg, commands, frames_own)
-        replayed = TimeLoop(Case.from_config(cfg), nine.screens, 5, reconstructors=nine.reconstructors,
-                            slopes=RecordedSlopes.open(path, cfg, 5), commands=commands
-                            ).run(lambda start, f: frames_replayed.append(f.copy()))
+        replayed = TimeLoop(
+            Case.from_config(cfg),
+            nine.screens,
+            5,
+            reconstructors=nine.reconstructors,
+            slopes=RecordedSlopes.open(path, cfg, 5),
+            commands=commands,
+        ).run(lambda start, f: frames_replayed.append(f.copy()))
         assert replayed.identical(own), ao
         np.testing.assert_array_equal(np.concatenate(frames_replayed, 1), np.concatenate(frames_own, 1))
     with pytest.raises(ValueError, match="seed 6"):
@@ -296,7 +318,7 @@ class _Recorder(simulation.OpenLoopCorrection):
 
 @pytest.mark.parametrize("delay", [2, 3, 6])
 def test_dm_shape_is_the_fit_of_the_delayed_measurement(ground, monkeypatch, delay):
-    """"The DM shape applied at a step is exactly the fit of the measurement that
+    """ "The DM shape applied at a step is exactly the fit of the measurement that
     ended the configured delay earlier", on one frozen layer.
 
     The ground layer moves by exactly 2 screen samples per step, so the phase
@@ -357,7 +379,7 @@ def test_dm_shape_is_the_fit_of_the_delayed_measurement(ground, monkeypatch, del
 
 
 def test_corrected_residual_grows_with_the_delay(nine):
-    """"The corrected residual grows with the delay": mean true (corrected) rms
+    """ "The corrected residual grows with the delay": mean true (corrected) rms
     on the 9-layer profile (fast high layers: 24, 39, 20 m/s at 4.5, 9, 18 km),
     LTAO, delay 2, 4, 8 steps (5, 10, 20 ms), same screens and frames.
 
@@ -381,7 +403,7 @@ def test_corrected_residual_grows_with_the_delay(nine):
 
 # 4 -------------------------------------------------------------------------------------------
 def test_ground_layer_ltao_equals_glao(ground):
-    """"One turbulent layer at the ground: LTAO and GLAO give the same correction."
+    """ "One turbulent layer at the ground: LTAO and GLAO give the same correction."
 
     Atmosphere and prior are one layer at h = 0 (GLAO takes the layers up to
     100 m, i.e. that one): the tomographic estimate along the on-axis target
@@ -401,7 +423,7 @@ def test_ground_layer_ltao_equals_glao(ground):
 
 
 def test_ltao_beats_glao_on_axis(nine):
-    """"On the 9-layer profile LTAO corrects the on-axis target better than GLAO."
+    """ "On the 9-layer profile LTAO corrects the on-axis target better than GLAO."
 
     Measured mean true rms (seed 5, 1.2 s): LTAO 210 nm, GLAO 325 nm; with
     seeds 6-8: 191/317, 189/300, 189/315 nm. We require the paired difference
@@ -419,7 +441,7 @@ def test_ltao_beats_glao_on_axis(nine):
 
 # 5 -------------------------------------------------------------------------------------------
 def test_pseudo_closed_loop_residual_default_profile(nine):
-    """"The pseudo-closed-loop residual is lower than the open-loop rms, tracks the
+    """ "The pseudo-closed-loop residual is lower than the open-loop rms, tracks the
     true corrected rms (state the correlation you measure)", default profile, LTAO.
 
     Mean residual < 0.3 x mean open-loop rms (measured 62 vs 389 nm, seed 5;
@@ -440,9 +462,11 @@ def test_pseudo_closed_loop_residual_default_profile(nine):
     """
     tel = nine.run("ltao", NINE_S)
     true, lgs, res = (tel[v].values[0] for v in ("true_rms_nm", "lgs_rms_nm", "lgs_residual_rms_nm"))
-    print(f"means: residual {res.mean():.1f}, open loop {lgs.mean():.1f}, true {true.mean():.1f}; "
-          f"r(res, true) {np.corrcoef(res, true)[0, 1]:.3f} / {_ranks_corr(res, true):.3f}, "
-          f"r(lgs, true) {np.corrcoef(lgs, true)[0, 1]:.3f} / {_ranks_corr(lgs, true):.3f}")
+    print(
+        f"means: residual {res.mean():.1f}, open loop {lgs.mean():.1f}, true {true.mean():.1f}; "
+        f"r(res, true) {np.corrcoef(res, true)[0, 1]:.3f} / {_ranks_corr(res, true):.3f}, "
+        f"r(lgs, true) {np.corrcoef(lgs, true)[0, 1]:.3f} / {_ranks_corr(lgs, true):.3f}"
+    )
     assert np.all(np.isfinite(res)) and np.all(res > 0)
     assert res.mean() < 0.3 * lgs.mean()
     assert res.mean() < true.mean()
@@ -450,7 +474,7 @@ def test_pseudo_closed_loop_residual_default_profile(nine):
 
 
 def test_pseudo_closed_loop_residual_tracks_the_truth(ground):
-    """"The pseudo-closed-loop residual ... tracks the true corrected rms", where
+    """ "The pseudo-closed-loop residual ... tracks the true corrected rms", where
     the physics requires it: one ground layer (seen identically by every LGS and
     the target, no cone effect) at 26 m/s with a 4-step (10 ms) delay, so the
     corrected error is dominated by the lag error (0.26 m of wind, half the DM
@@ -473,8 +497,10 @@ def test_pseudo_closed_loop_residual_tracks_the_truth(ground):
     true, lgs, res = (tel[v].values[0] for v in ("true_rms_nm", "lgs_rms_nm", "lgs_residual_rms_nm"))
     r_res, r_lgs = np.corrcoef(res, true)[0, 1], np.corrcoef(lgs, true)[0, 1]
     s_res, s_lgs = _ranks_corr(res, true), _ranks_corr(lgs, true)
-    print(f"ground, delay 4: means residual {res.mean():.1f}, open loop {lgs.mean():.1f}, true {true.mean():.1f}; "
-          f"r(res, true) {r_res:.3f} / {s_res:.3f}, r(lgs, true) {r_lgs:.3f} / {s_lgs:.3f}")
+    print(
+        f"ground, delay 4: means residual {res.mean():.1f}, open loop {lgs.mean():.1f}, true {true.mean():.1f}; "
+        f"r(res, true) {r_res:.3f} / {s_res:.3f}, r(lgs, true) {r_lgs:.3f} / {s_lgs:.3f}"
+    )
     assert res.mean() < lgs.mean()
     assert r_res >= 0.6 and s_res >= 0.6, (r_res, s_res)
     assert r_res >= r_lgs + 0.15 and s_res >= s_lgs + 0.15, (r_res, r_lgs, s_res, s_lgs)

@@ -19,8 +19,13 @@ REPO = Path(__file__).resolve().parents[1]
 def test_the_tutorial_runs_and_prints_what_it_promises(tmp_path):
     checkout = tmp_path / "checkout"
     shutil.copytree(REPO / "config", checkout / "config")
-    result = subprocess.run([sys.executable, str(REPO / "docs" / "examples" / "tutorial.py"), str(tmp_path)],
-                            cwd=checkout, capture_output=True, text=True, timeout=900)
+    result = subprocess.run(
+        [sys.executable, str(REPO / "docs" / "examples" / "tutorial.py"), str(tmp_path)],
+        cwd=checkout,
+        capture_output=True,
+        text=True,
+        timeout=900,
+    )
     assert result.returncode == 0, result.stderr[-3000:]
     lines = result.stdout.splitlines()
     assert sum(line.startswith("selection by lgs_rms") for line in lines) == 9  # one per fraction

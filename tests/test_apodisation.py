@@ -91,7 +91,7 @@ def test_blocking_the_largest_residual_lowers_the_kept_rms(imager, fraction):
     better = 0
     for _ in range(20):
         k = rng.normal(0, 3.0, (12, 2))  # spatial frequencies [rad/m]
-        phase = (rng.normal(size=12) @ np.cos(k @ np.stack([x, y]) + rng.uniform(0, 2 * np.pi, (12, 1))))
+        phase = rng.normal(size=12) @ np.cos(k @ np.stack([x, y]) + rng.uniform(0, 2 * np.pi, (12, 1)))
         phase = phase.astype(np.float32)
         whole = TiltRemover(x, y)
         kept = apodiser.from_residual(whole.residual(phase)) > 0

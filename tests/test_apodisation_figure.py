@@ -6,11 +6,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
-from luckyao.studyspec.study import load_study, validate_study
-from luckyao.figures import FIGURE_KINDS, FigureSettings
-from luckyao.studyspec.sweeps import expand_sweeps, sweep_points
 from synthetic import lucky_dataset
+
+from luckyao.figures import FIGURE_KINDS, FigureSettings
+from luckyao.studyspec.study import load_study, validate_study
+from luckyao.studyspec.sweeps import expand_sweeps, sweep_points
 
 CONFIG = Path(__file__).resolve().parents[1] / "config"
 N_FRAMES, N_BLOCKS = 100, 5
@@ -22,8 +22,9 @@ def figure():
     cases = validate_study(config)
     spec = expand_sweeps(config)["figures"]["apodisation"]
     points = [[p.case, p.values] for p in sweep_points(config, "apodisation")]
-    settings = FigureSettings.from_dict({**spec, "case_configs": {c: cases[c] for c in spec["cases"]},
-                                         "sweep_points": points})
+    settings = FigureSettings.from_dict(
+        {**spec, "case_configs": {c: cases[c] for c in spec["cases"]}, "sweep_points": points}
+    )
     rng = np.random.default_rng(2)
     fluxes = [1.0 - rng.uniform(0, p[1]["ao.apodisation.blocked_fraction"] * 1.5, N_FRAMES) for p in points]
     datasets = [lucky_dataset(k / 10, N_BLOCKS, transmitted_flux=f) for k, f in enumerate(fluxes)]
@@ -38,16 +39,17 @@ def test_every_point_is_an_apodised_case_at_8_2_m(figure):
     for case, values in points:
         config = cases[case]
         assert config["telescope"]["diameter_m"] == 8.2 and config["wfs"]["n_subapertures"] == 16
-        assert config["ao"]["apodisation"] == {"driver": values["ao.apodisation.driver"],
-                                               "blocked_fraction": values["ao.apodisation.blocked_fraction"]}
+        assert config["ao"]["apodisation"] == {
+            "driver": values["ao.apodisation.driver"],
+            "blocked_fraction": values["ao.apodisation.blocked_fraction"],
+        }
 
 
 def test_flux_lost_and_its_block_error(figure):
     """1 - the mean transmitted flux, and the spread of its five block means over sqrt(5)."""
     points, _, fluxes, ds, _ = figure
     for (case, values), flux in zip(points, fluxes):
-        cell = ds.sel(series=f"driver {values['ao.apodisation.driver']}",
-                      x=values["ao.apodisation.blocked_fraction"])
+        cell = ds.sel(series=f"driver {values['ao.apodisation.driver']}", x=values["ao.apodisation.blocked_fraction"])
         lost = 1.0 - flux
         assert cell.flux_lost.item() == pytest.approx(lost.mean())
         blocks = lost.reshape(N_BLOCKS, -1).mean(axis=1)

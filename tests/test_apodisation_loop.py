@@ -5,13 +5,13 @@ import numpy as np
 import pytest
 
 from luckyao.atmosphere.screens import ScreenSet, strip_screen
-from luckyao.studyspec.case import Case
-from luckyao.studyspec.schema import ConfigError, deep_merge
-from luckyao.studyspec.products import commands_spec, reconstructor_spec, turbulence_spec
-from luckyao.studyspec.study import load_study, validate_study
 from luckyao.steps.reconstructor import build_commands, build_reconstructors
-from luckyao.steps.simulation import Replay, lgs_chain, simulate
 from luckyao.steps.screens import TurbulenceSpec, strip_specs
+from luckyao.steps.simulation import Replay, lgs_chain, simulate
+from luckyao.studyspec.case import Case
+from luckyao.studyspec.products import commands_spec, reconstructor_spec, turbulence_spec
+from luckyao.studyspec.schema import ConfigError, deep_merge
+from luckyao.studyspec.study import load_study, validate_study
 
 DURATION_S = 0.3  # 30 lucky frames
 
@@ -22,8 +22,9 @@ def loop():
     base = deep_merge(cases["ltao_r0_13.5cm"], {"duration_s": DURATION_S, "wfs": {"calibration": "none"}})
     spec = dict(turbulence_spec(config, base), duration_s=DURATION_S + 0.05, max_pixel_m=0.033)
     specs = strip_specs(TurbulenceSpec.from_config(spec))
-    screens = ScreenSet.from_screens(specs, [strip_screen(s, spec["outer_scale_m"], np.random.default_rng([3, i]))
-                                             for i, s in enumerate(specs)])
+    screens = ScreenSet.from_screens(
+        specs, [strip_screen(s, spec["outer_scale_m"], np.random.default_rng([3, i])) for i, s in enumerate(specs)]
+    )
     reconstructors = build_reconstructors(reconstructor_spec(base))["reconstructor"].values
     c = build_commands(commands_spec(base))
     commands = (c.command_matrix.values, c.dm_slopes.values)
@@ -67,19 +68,27 @@ def test_frame_flux_is_the_transmitted_flux(loop, driver):
 
 def test_config_key_checked():
     config, cases = load_study("config/config.yaml")
-    study = deep_merge(config, {"cases": {"ltao_r0_13.5cm": {"ao": {"mode": "none", "apodisation": {
-        "driver": "lgs", "blocked_fraction": 0.2}}}}})
+    study = deep_merge(
+        config,
+        {
+            "cases": {
+                "ltao_r0_13.5cm": {"ao": {"mode": "none", "apodisation": {"driver": "lgs", "blocked_fraction": 0.2}}}
+            }
+        },
+    )
     with pytest.raises(ConfigError, match=r"ltao_r0_13.5cm\.ao\.apodisation"):
         validate_study(study)
-    study = deep_merge(config, {"cases": {"ltao_r0_13.5cm": {"ao": {"apodisation": {
-        "driver": "lgs", "blocked_fraction": 1.0}}}}})
+    study = deep_merge(
+        config, {"cases": {"ltao_r0_13.5cm": {"ao": {"apodisation": {"driver": "lgs", "blocked_fraction": 1.0}}}}}
+    )
     with pytest.raises(ConfigError, match="blocked_fraction"):
         validate_study(study)
 
 
 def test_replay_of_an_apodised_case_refused():
     _, cases = load_study("config/config.yaml")
-    case = Case.from_config(deep_merge(cases["ltao_r0_13.5cm"], {"ao": {"apodisation": {
-        "driver": "oracle", "blocked_fraction": 0.2}}}))
+    case = Case.from_config(
+        deep_merge(cases["ltao_r0_13.5cm"], {"ao": {"apodisation": {"driver": "oracle", "blocked_fraction": 0.2}}})
+    )
     with pytest.raises(ValueError, match="apodis"):
         next(Replay(case, None, [0], None)())

@@ -20,9 +20,9 @@ import xarray as xr
 import yaml
 
 from luckyao.archive.create import CHECKSUMS, checksum_list, read_members, runtime_packages, write_members
+from luckyao.archive.verify import MEMBER_LIMIT_BYTES, compare_variables
 from luckyao.cli import main
 from luckyao.studyspec.study import validate_study
-from luckyao.archive.verify import MEMBER_LIMIT_BYTES, compare_variables
 
 pytestmark = pytest.mark.workflow  # runs Snakemake, a study or the command line: -m 'not workflow' skips it
 
@@ -92,8 +92,11 @@ def test_archive_holds_config_results_figures_versions_and_checksums(study, arch
     study_config = yaml.safe_load((study / "config" / "config.yaml").read_text())
     assert yaml.safe_load(members["config.yaml"]) == study_config
     for case in study_config["cases"]:
-        assert {f"results/cases/{case}/lucky.nc", f"results/cases/{case}/telemetry.nc",
-                f"results/benchmarks/simulate/{case}.tsv"} <= set(members)
+        assert {
+            f"results/cases/{case}/lucky.nc",
+            f"results/cases/{case}/telemetry.nc",
+            f"results/benchmarks/simulate/{case}.tsv",
+        } <= set(members)
     for fig in study_config["figures"]:
         assert {f"figures/{fig}.nc", f"figures/{fig}.png", f"figures/{fig}.pdf"} <= set(members)
     assert not any(name.endswith(("frames.nc", ".npy")) for name in members)
@@ -179,10 +182,16 @@ def test_requirements_lock_pins_every_runtime_dependency():
 
 
 def test_compare_states_agreement_per_variable():
-    archived = xr.Dataset({"a": ("x", [1.0, np.nan]), "b": ("x", [1.0, 2.0]), "c": ("x", [1, 2]),
-                           "gone": ((), 0.0)}, coords={"x": ["p", "q"]}, attrs={"seed": 1})
-    fresh = xr.Dataset({"a": ("x", [1.0, np.nan]), "b": ("x", [1.0, 2.002]), "c": ("x", [1, 3]),
-                        "new": ((), 0.0)}, coords={"x": ["p", "r"]}, attrs={"seed": 1})
+    archived = xr.Dataset(
+        {"a": ("x", [1.0, np.nan]), "b": ("x", [1.0, 2.0]), "c": ("x", [1, 2]), "gone": ((), 0.0)},
+        coords={"x": ["p", "q"]},
+        attrs={"seed": 1},
+    )
+    fresh = xr.Dataset(
+        {"a": ("x", [1.0, np.nan]), "b": ("x", [1.0, 2.002]), "c": ("x", [1, 3]), "new": ((), 0.0)},
+        coords={"x": ["p", "r"]},
+        attrs={"seed": 1},
+    )
     rows = {name: (agrees, how) for name, agrees, how in compare_variables(fresh, archived, 1e-2, 0.0)}
     assert rows["a"] == (True, "identical") and rows["attribute seed"] == (True, "identical")
     assert rows["b"][0] and "max abs diff 0.002, max rel diff 0.001: within rtol=0.01" in rows["b"][1]
@@ -212,8 +221,9 @@ def test_verify_names_a_changed_case_it_does_not_rerun_only_with_all_cases(archi
     assert "results/cases/good/lucky.nc: strehl: identical" in output
 
 
-def test_a_corrupt_member_of_the_rerun_case_is_named_and_its_scratch_folder_removed(archive, verified, tmp_path,
-                                                                                   capsys, monkeypatch):
+def test_a_corrupt_member_of_the_rerun_case_is_named_and_its_scratch_folder_removed(
+    archive, verified, tmp_path, capsys, monkeypatch
+):
     """The scratch folder is given a copy of the finished rerun (Snakemake reruns nothing)."""
     _, _, rerun = verified
     member = "results/cases/good/telemetry.nc"
@@ -252,9 +262,11 @@ def test_verify_reads_a_tar_bomb_in_bounded_memory(tmp_path):
         info = tarfile.TarInfo("bomb/results/cases/good/lucky.nc")
         info.size = size
         tar.addfile(info, io.BufferedReader(Zeros(size)))
-    script = ("import resource, sys; from luckyao.cli import main; import luckyao.archive.verify; "
-              "before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss; code = main(['verify', sys.argv[1]]); "
-              "print(code, resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - before)")
+    script = (
+        "import resource, sys; from luckyao.cli import main; import luckyao.archive.verify; "
+        "before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss; code = main(['verify', sys.argv[1]]); "
+        "print(code, resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - before)"
+    )
     result = subprocess.run([sys.executable, "-c", script, str(bomb)], capture_output=True, text=True, timeout=300)
     code, growth_kib = map(int, result.stdout.split()[-2:])
     assert code == 1 and "results/cases/good/lucky.nc: not in SHA256SUMS" in result.stdout, result.stdout
@@ -290,8 +302,11 @@ def test_verify_refuses_a_link_or_other_non_regular_member(kind, archive, tmp_pa
     info.linkname = "/etc/passwd" if kind != "fifo" else ""
     code, output = verify(capsys, appended(archive, tmp_path / "a.tar", (info, b"")), "--no-rerun")
     assert code == 1, output
-    expected = {"symlink": "is a symbolic link to '/etc/passwd'", "hardlink": "is a hard link to '/etc/passwd'",
-                "fifo": "is a device or FIFO"}[kind]
+    expected = {
+        "symlink": "is a symbolic link to '/etc/passwd'",
+        "hardlink": "is a hard link to '/etc/passwd'",
+        "fifo": "is a device or FIFO",
+    }[kind]
     assert f"member results/cases/good/extra.nc {expected}" in output, output
 
 
@@ -332,9 +347,11 @@ def test_verify_reads_many_large_benchmark_members_in_bounded_memory(tmp_path):
             info = tarfile.TarInfo(f"bench/results/benchmarks/simulate/case{i}.tsv")
             info.size = size
             tar.addfile(info, io.BufferedReader(Zeros(size)))
-    script = ("import resource, sys; from luckyao.cli import main; import luckyao.archive.verify; "
-              "before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss; code = main(['verify', sys.argv[1]]); "
-              "print(code, resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - before)")
+    script = (
+        "import resource, sys; from luckyao.cli import main; import luckyao.archive.verify; "
+        "before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss; code = main(['verify', sys.argv[1]]); "
+        "print(code, resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - before)"
+    )
     result = subprocess.run([sys.executable, "-c", script, str(bomb)], capture_output=True, text=True, timeout=600)
     code, growth_kib = map(int, result.stdout.split()[-2:])
     assert code == 1 and "claims 16,777,216 bytes, more than verify reads (65,536)" in result.stderr, result.stderr

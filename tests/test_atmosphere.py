@@ -33,10 +33,12 @@ def test_structure_function_is_the_transform_of_the_psd():
 
     r0, outer_scale = 0.15, L0_M
     for r in (0.1, 1.0, 4.2, 30.0):
-        integrand = lambda f: 4 * np.pi * f * von_karman_psd(f, r0, outer_scale) * (1 - j0(2 * np.pi * f * r))
+        integrand = lambda f: 4 * np.pi * f * von_karman_psd(f, r0, outer_scale) * (1 - j0(2 * np.pi * f * r))  # noqa: B023, E731
         cut = 2000 / r
-        body = sum(quad(integrand, a, b, limit=2000)[0]
-                   for a, b in zip(np.linspace(0, cut, 41)[:-1], np.linspace(0, cut, 41)[1:]))
+        body = sum(
+            quad(integrand, a, b, limit=2000)[0]
+            for a, b in zip(np.linspace(0, cut, 41)[:-1], np.linspace(0, cut, 41)[1:])
+        )
         tail = 4 * np.pi * _VK_COEFFICIENT * r0 ** (-5 / 3) * 0.6 * (cut**2 + outer_scale**-2) ** (-5 / 6)
         assert von_karman_structure_function(r, r0, outer_scale) == pytest.approx(body + tail, rel=1e-4)
 
@@ -86,7 +88,7 @@ def test_screens_follow_von_karman_from_small_to_pupil_scales(direction_deg, n_s
 
 
 def test_r0_and_wavelength_scaling():
-    assert r0_at_wavelength(0.135, 800e-9) == pytest.approx(0.135 * 1.6 ** 1.2)
+    assert r0_at_wavelength(0.135, 800e-9) == pytest.approx(0.135 * 1.6**1.2)
     # phase in rad scales as 1/lambda; D(r) at lambda with r0(lambda) must agree
     r = np.array([0.05, 0.5, 2.0])
     d500 = von_karman_structure_function(r, 0.135, L0_M)
@@ -117,8 +119,9 @@ def test_strip_spec_holds_the_whole_flow():
     assert step == pytest.approx(38.8 * 0.0025)
     cos = abs(np.sin(np.radians(252.0)))
     # lines follow the wind: slope minor/major = cot(252 deg)
-    assert spec.skew / spec.n_major == pytest.approx(np.cos(np.radians(252.0)) / np.sin(np.radians(252.0)),
-                                                     abs=1 / spec.n_major)
+    assert spec.skew / spec.n_major == pytest.approx(
+        np.cos(np.radians(252.0)) / np.sin(np.radians(252.0)), abs=1 / spec.n_major
+    )
     assert spec.n_major * spec.dx_m >= cos * 1000 * 38.8 * 0.0025 + 10.0
     assert spec.n_major * spec.dx_m / cos >= 100.0  # along-wind period
     assert spec.n_minor * spec.dx_m * cos >= 16.8  # width across the wind
@@ -130,14 +133,25 @@ def test_screens_made_layers_at_once_are_the_same_numbers(tmp_path):
     thread, and each layer is ``strip_screen`` of its own stream."""
     from luckyao.steps.screens import TurbulenceSpec, read_screens, strip_specs, write_screens
 
-    spec = {"seed": 5, "duration_s": 0.5, "max_pixel_m": 0.05, "field_radius_arcsec": 10, "min_along_m": 20.0,
-            "min_across_m": 4.0, "time_step_s": 0.0025, "diameter_m": 1.0, "outer_scale_m": L0_M,
-            "height_m": [0.0, 1000.0, 8000.0], "wind_speed_m_s": [5.0, 30.0, 12.0],
-            "wind_direction_deg": [0.0, 120.0, 250.0]}
+    spec = {
+        "seed": 5,
+        "duration_s": 0.5,
+        "max_pixel_m": 0.05,
+        "field_radius_arcsec": 10,
+        "min_along_m": 20.0,
+        "min_across_m": 4.0,
+        "time_step_s": 0.0025,
+        "diameter_m": 1.0,
+        "outer_scale_m": L0_M,
+        "height_m": [0.0, 1000.0, 8000.0],
+        "wind_speed_m_s": [5.0, 30.0, 12.0],
+        "wind_direction_deg": [0.0, 120.0, 250.0],
+    }
     for threads in (1, 3):
         write_screens(spec, tmp_path / f"{threads}.npy", tmp_path / f"{threads}.nc", {}, threads=threads)
     assert (tmp_path / "1.npy").read_bytes() == (tmp_path / "3.npy").read_bytes()
     screens = read_screens(tmp_path / "3.npy", tmp_path / "3.nc")
     for i, s in enumerate(strip_specs(TurbulenceSpec.from_config(spec))):
-        np.testing.assert_array_equal(screens.screen(i),
-                                      strip_screen(s, L0_M, np.random.default_rng([spec["seed"], i])))
+        np.testing.assert_array_equal(
+            screens.screen(i), strip_screen(s, L0_M, np.random.default_rng([spec["seed"], i]))
+        )

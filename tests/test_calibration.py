@@ -11,12 +11,12 @@ import yaml
 from luckyao.atmosphere.screens import ScreenSet, periodic_screen_amplitude, periodic_screen_pair, strip_screen
 from luckyao.optics.pupil import Telescope
 from luckyao.steps import calibration as calibration_product
+from luckyao.steps.reconstructor import build_commands, build_reconstructors
+from luckyao.steps.screens import TurbulenceSpec, strip_specs
+from luckyao.steps.simulation import lgs_chain, simulate
 from luckyao.studyspec.case import Case
 from luckyao.studyspec.products import calibration_spec, commands_spec, reconstructor_spec, turbulence_spec
 from luckyao.studyspec.schema import deep_merge
-from luckyao.steps.reconstructor import build_commands, build_reconstructors
-from luckyao.steps.simulation import lgs_chain, simulate
-from luckyao.steps.screens import TurbulenceSpec, strip_specs
 from luckyao.units import ARCSEC_RAD, REFERENCE_WAVELENGTH_M
 from luckyao.wfs import shack_hartmann as sh
 from luckyao.wfs.beacons import LgsConfig
@@ -26,8 +26,10 @@ from luckyao.wfs.centroiders import CentreOfGravity, Correlation, ThresholdedCen
 TELESCOPE = Telescope(4.2, 1.2)
 HEIGHTS_M = (47, 140, 281, 562, 1125, 2250, 4500, 9000, 18000)  # the study's profile
 CN2 = (0.5224, 0.0260, 0.0444, 0.1160, 0.0989, 0.0295, 0.0598, 0.0430, 0.0600)
-BEACONS = {"rayleigh": LgsConfig(22e3, 532e-9, 4, 40.0),
-           "sodium": LgsConfig(90e3, 589e-9, 4, 40.0, profile="gaussian", profile_width_m=10e3)}
+BEACONS = {
+    "rayleigh": LgsConfig(22e3, 532e-9, 4, 40.0),
+    "sodium": LgsConfig(90e3, 589e-9, 4, 40.0, profile="gaussian", profile_width_m=10e3),
+}
 
 
 @cache
@@ -44,12 +46,14 @@ def known_phases(wfs):
     x, y = (c / 2.1 for c in wfs.grid.xy_m)  # unit pupil radius
     theta = 0.15 * ARCSEC_RAD
     scale = theta * 2.1  # optical path [m] for a slope theta over the pupil radius
-    paths = [(x, (np.ones_like(x), 0 * x)),
-             (y, (0 * x, np.ones_like(x))),
-             ((x**2 + y**2) / 2, (x, y)),
-             ((x**2 - y**2) / 2, (x, -y)),
-             (x * y, (y, x)),
-             ((x**2 + y**2) * x / 3, ((3 * x**2 + y**2) / 3, 2 * x * y / 3))]
+    paths = [
+        (x, (np.ones_like(x), 0 * x)),
+        (y, (0 * x, np.ones_like(x))),
+        ((x**2 + y**2) / 2, (x, y)),
+        ((x**2 - y**2) / 2, (x, -y)),
+        (x * y, (y, x)),
+        ((x**2 + y**2) * x / 3, ((3 * x**2 + y**2) / 3, 2 * x * y / 3)),
+    ]
     phases = np.stack([scale * p for p, _ in paths]) * 2 * np.pi / REFERENCE_WAVELENGTH_M
     gradients = np.stack([np.stack(g) for _, g in paths]) * theta
     return phases, gradients
@@ -73,11 +77,13 @@ def responses(wfs, elongation, seeing, estimate, draws, seed):
     total = np.zeros((len(phases), 2, wfs.n_valid))
     for _ in range(draws):
         down, up = periodic_screen_pair(amplitude, rng)
-        down = np.stack([down[i:i + n, j:j + n] for i in (0, 2 * n) for j in (0, 2 * n)])
-        up = np.stack([up[i:i + n_launch, j:j + n_launch] for i in (0, 2 * n) for j in (0, 2 * n)])[None]
+        down = np.stack([down[i : i + n, j : j + n] for i in (0, 2 * n) for j in (0, 2 * n)])
+        up = np.stack([up[i : i + n_launch, j : j + n_launch] for i in (0, 2 * n) for j in (0, 2 * n)])[None]
         for k, phase in enumerate(phases):
-            plus, minus = (estimate(sh.exposure_images(wfs, (down + sign * phase)[None], REFERENCE_WAVELENGTH_M,
-                                                       elongation, up)) for sign in (1.0, -1.0))
+            plus, minus = (
+                estimate(sh.exposure_images(wfs, (down + sign * phase)[None], REFERENCE_WAVELENGTH_M, elongation, up))
+                for sign in (1.0, -1.0)
+            )
             total[k] += ((plus - minus) / 2).sum(axis=0)
     return total / (4 * draws)
 
@@ -127,10 +133,13 @@ def test_correlation_centroider_is_unbiased_for_a_shifted_elongated_spot(beacon)
     for shift in ([0.3 * pixel, -0.1 * pixel], [-0.05 * pixel, 0.33 * pixel]):
         images = shifted_images(wfs, spectra, np.array(shift))
         estimate = correlation.positions(images)[0]
-        np.testing.assert_allclose(estimate, np.broadcast_to(np.array(shift)[:, None], estimate.shape),
-                                   atol=1e-4 * pixel)
-        cog = CentreOfGravity(wfs).positions(images)[0] - CentreOfGravity(wfs).positions(
-            shifted_images(wfs, spectra, np.zeros(2)))[0]
+        np.testing.assert_allclose(
+            estimate, np.broadcast_to(np.array(shift)[:, None], estimate.shape), atol=1e-4 * pixel
+        )
+        cog = (
+            CentreOfGravity(wfs).positions(images)[0]
+            - CentreOfGravity(wfs).positions(shifted_images(wfs, spectra, np.zeros(2)))[0]
+        )
         assert np.abs(cog - np.array(shift)[:, None]).max() > 0.1 * np.abs(shift).max()
 
 
@@ -147,8 +156,9 @@ def test_thresholded_centre_of_gravity_ignores_a_background():
     np.testing.assert_allclose(tcog[0], 0.5 * pixel, rtol=1e-5)
     np.testing.assert_allclose(tcog[1], -0.5 * pixel, rtol=1e-5)
     assert np.all(CentreOfGravity(wfs).positions(background)[0, 0] < 0.45 * pixel)
-    np.testing.assert_array_equal(ThresholdedCentreOfGravity(wfs, 0.0).positions(background),
-                                  CentreOfGravity(wfs).positions(background))
+    np.testing.assert_array_equal(
+        ThresholdedCentreOfGravity(wfs, 0.0).positions(background), CentreOfGravity(wfs).positions(background)
+    )
 
 
 TINY = Path(__file__).parent / "data" / "tiny.yaml"
@@ -164,8 +174,9 @@ def tiny_ltao():
     study = yaml.safe_load(TINY.read_text())
     config = deep_merge(study["base"], {"lgs": {"enabled": True}, "ao": {"mode": "ltao"}, "duration_s": 0.1})
     specs = strip_specs(TurbulenceSpec.from_config(turbulence_spec(study, config)))
-    screens = ScreenSet.from_screens(specs, [strip_screen(s, 20.0, np.random.default_rng([7, i]))
-                                             for i, s in enumerate(specs)])
+    screens = ScreenSet.from_screens(
+        specs, [strip_screen(s, 20.0, np.random.default_rng([7, i])) for i, s in enumerate(specs)]
+    )
     reconstructors = build_reconstructors(reconstructor_spec(config))["reconstructor"].values
     commands = build_commands(commands_spec(config))
     commands = commands["command_matrix"].values, commands["dm_slopes"].values

@@ -36,14 +36,27 @@ EXPECTED = {
 
 def _snakemake(copy: Path, workdir: Path, *args):
     env = dict(os.environ, PYTHONPATH=str(copy / "src"))
-    command = [sys.executable, "-m", "snakemake", "-s", str(copy / "Snakefile"), "-d", str(workdir),
-               "--cores", "2", *args]
+    command = [
+        sys.executable,
+        "-m",
+        "snakemake",
+        "-s",
+        str(copy / "Snakefile"),
+        "-d",
+        str(workdir),
+        "--cores",
+        "2",
+        *args,
+    ]
     return subprocess.run(command, capture_output=True, text=True, timeout=600, env=env)
 
 
 def _rules_planned(result) -> set[str]:
-    return {line.split()[1].rstrip(":") for line in result.stdout.splitlines()
-            if line.strip().startswith(("rule ", "localrule "))} - {"all"}
+    return {
+        line.split()[1].rstrip(":")
+        for line in result.stdout.splitlines()
+        if line.strip().startswith(("rule ", "localrule "))
+    } - {"all"}
 
 
 @pytest.fixture(scope="module")
@@ -57,8 +70,10 @@ def study_copy(tmp_path_factory):
     study = yaml.safe_load(TINY.read_text())
     study["keep_frames"] = True
     study["cases"] = {"good": study["cases"]["good"]}
-    study["figures"] = {"quality": dict(study["figures"]["quality"], cases=["good"]),
-                        "longexp": dict(study["figures"]["longexp"], cases=["good"])}
+    study["figures"] = {
+        "quality": dict(study["figures"]["quality"], cases=["good"]),
+        "longexp": dict(study["figures"]["longexp"], cases=["good"]),
+    }
     workdir = copy / "run"
     (workdir / "config").mkdir(parents=True)
     (workdir / "config" / "config.yaml").write_text(yaml.safe_dump(study))
@@ -86,8 +101,11 @@ def test_a_job_that_finds_nan_in_its_input_names_it_and_the_next_run_remakes_it(
     shutil.copytree(copy, moved, symlinks=True)
     telemetry = moved / "run" / "results" / "cases" / "good" / "telemetry.nc"
     with netCDF4.Dataset(telemetry, "r+") as nc:
-        name, variable = next((name, v) for name, v in nc.variables.items()
-                              if v.dtype.kind == "f" and "frame" in v.dimensions and name != "axis_strehl")
+        name, variable = next(
+            (name, v)
+            for name, v in nc.variables.items()
+            if v.dtype.kind == "f" and "frame" in v.dimensions and name != "axis_strehl"
+        )
         variable[(0,) * variable.ndim] = np.nan
     failed = _snakemake(moved, moved / "run", "--forcerun", "lucky")
     assert failed.returncode != 0
@@ -117,7 +135,11 @@ def test_a_post_processing_setting_reruns_no_time_loop(study_copy):
     copy, workdir = study_copy
     overlay = workdir / "fractions.yaml"
     overlay.write_text(yaml.safe_dump({"lucky": {"fractions": [0.05, 0.1, 0.5, 1.0]}}))
-    assert _rules_planned(_snakemake(copy, workdir, "--dry-run", "--configfile", str(overlay))) == {"lucky", "figure", "export"}
+    assert _rules_planned(_snakemake(copy, workdir, "--dry-run", "--configfile", str(overlay))) == {
+        "lucky",
+        "figure",
+        "export",
+    }
 
 
 def test_a_name_imported_from_a_package_depends_on_the_module_that_defines_it(tmp_path):

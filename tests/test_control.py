@@ -37,8 +37,7 @@ def screen_m(r0_m, seed):
 
 
 def sample(screen, x_m, y_m):
-    index = [np.asarray(y_m) / SCREEN_DX_M + (SCREEN_N - 1) / 2,
-             np.asarray(x_m) / SCREEN_DX_M + (SCREEN_N - 1) / 2]
+    index = [np.asarray(y_m) / SCREEN_DX_M + (SCREEN_N - 1) / 2, np.asarray(x_m) / SCREEN_DX_M + (SCREEN_N - 1) / 2]
     return map_coordinates(screen, index, order=3, mode="wrap")
 
 
@@ -91,9 +90,10 @@ def test_ltao_equals_glao_for_a_ground_layer():
     glao = command_matrix(prior, GEOMETRY, NOISE_RAD, DM, "glao")
     np.testing.assert_allclose(ltao @ slopes, glao @ slopes, atol=1e-5 * np.abs(glao @ slopes).max())
     layered = TurbulencePrior(0.135, 20.0, (0.0, 4500.0), (0.5, 0.5))
-    np.testing.assert_array_equal(command_matrix(layered, GEOMETRY, NOISE_RAD, DM, "ltao"),
-                                  command_matrix(layered, GEOMETRY, NOISE_RAD, DM, "glao",
-                                                 ground_max_height_m=4500.0))
+    np.testing.assert_array_equal(
+        command_matrix(layered, GEOMETRY, NOISE_RAD, DM, "ltao"),
+        command_matrix(layered, GEOMETRY, NOISE_RAD, DM, "glao", ground_max_height_m=4500.0),
+    )
 
 
 def test_ltao_beats_glao_on_a_layered_atmosphere():
@@ -157,7 +157,7 @@ def test_dm_slopes_match_finite_differences():
         np.testing.assert_allclose(slopes[b], expected, atol=2e-3 * rms)
     columns = matrix.reshape(LGS.n_beacons, 2, WFS.n_valid, DM.n_valid)
     assert np.abs(columns.mean(axis=2)).max() < 1e-6 * np.abs(columns).max()
-    np.testing.assert_array_equal(dm_slopes_matrix(DM, GEOMETRY, 2), matrix[:2 * 2 * WFS.n_valid])
+    np.testing.assert_array_equal(dm_slopes_matrix(DM, GEOMETRY, 2), matrix[: 2 * 2 * WFS.n_valid])
 
 
 def test_commands_recover_a_dm_shape():

@@ -75,22 +75,35 @@ def test_nan_in_a_frame_cube_is_named_against_it_and_the_cube_set_aside_for_the_
         writer.write(0, np.ones((1, 70, 8, 8), np.float32))
     with netCDF4.Dataset(path, "r+") as nc:
         nc["frames"][0, 66, 2, 3] = np.nan
-    with pytest.raises(ValueError, match=r"frames file '.*frames\.nc': variable 'frames' is not finite at "
-                                         r"frame=2, y=2, x=3 \(block from frame 64.*set aside as '.*frames\.nc\.bad'"):
+    with pytest.raises(
+        ValueError,
+        match=r"frames file '.*frames\.nc': variable 'frames' is not finite at "
+        r"frame=2, y=2, x=3 \(block from frame 64.*set aside as '.*frames\.nc\.bad'",
+    ):
         list(iter_frame_blocks(path, 0)())
     assert not path.exists() and path.with_name("frames.nc.bad").exists()
 
 
 def test_nan_in_a_telemetry_file_is_named_against_it_and_the_file_set_aside(study_job):
     path = study_job / "telemetry.nc"
-    write_dataset(xr.Dataset({"true_rms_m": (("target", "frame"), np.ones((1, 5))),
-                              "axis_strehl": (("target", "frame"), np.full((1, 5), np.nan))}), path,
-                  allow_nan={"axis_strehl"})
+    write_dataset(
+        xr.Dataset(
+            {
+                "true_rms_m": (("target", "frame"), np.ones((1, 5))),
+                "axis_strehl": (("target", "frame"), np.full((1, 5), np.nan)),
+            }
+        ),
+        path,
+        allow_nan={"axis_strehl"},
+    )
     assert open_dataset(path, "telemetry", allow_nan={"axis_strehl"}).sizes["frame"] == 5
     with netCDF4.Dataset(path, "r+") as nc:
         nc["true_rms_m"][0, 3] = np.nan
-    with pytest.raises(ValueError, match=r"telemetry file '.*telemetry\.nc': variable 'true_rms_m' is not finite "
-                                         r"at target=0, frame=3.*the next run remakes it"):
+    with pytest.raises(
+        ValueError,
+        match=r"telemetry file '.*telemetry\.nc': variable 'true_rms_m' is not finite "
+        r"at target=0, frame=3.*the next run remakes it",
+    ):
         open_dataset(path, "telemetry", allow_nan={"axis_strehl"})
     assert not path.exists() and path.with_name("telemetry.nc.bad").exists()
 
@@ -107,14 +120,16 @@ def test_a_truncated_input_is_set_aside_for_the_next_run(study_job):
 def test_a_failed_write_names_the_file_and_what_limits_it(tmp_path):
     """A file over the size limit (``ulimit -f``): the error names the file, the bytes written
     and the limit, not only netCDF's "HDF error"; nothing is left."""
-    script = ("import resource, signal, sys, numpy as np, xarray as xr\n"
-              "from luckyao.io.datasets import write_dataset\n"
-              "signal.signal(signal.SIGXFSZ, signal.SIG_IGN)\n"
-              "resource.setrlimit(resource.RLIMIT_FSIZE, (200_000, resource.RLIM_INFINITY))\n"
-              "try:\n"
-              "    write_dataset(xr.Dataset({'v': ('x', np.arange(100_000.0))}), sys.argv[1], compress=False)\n"
-              "except OSError as err:\n"
-              "    print(err)\n")
+    script = (
+        "import resource, signal, sys, numpy as np, xarray as xr\n"
+        "from luckyao.io.datasets import write_dataset\n"
+        "signal.signal(signal.SIGXFSZ, signal.SIG_IGN)\n"
+        "resource.setrlimit(resource.RLIMIT_FSIZE, (200_000, resource.RLIM_INFINITY))\n"
+        "try:\n"
+        "    write_dataset(xr.Dataset({'v': ('x', np.arange(100_000.0))}), sys.argv[1], compress=False)\n"
+        "except OSError as err:\n"
+        "    print(err)\n"
+    )
     path = tmp_path / "big.nc"
     result = subprocess.run([sys.executable, "-c", script, str(path)], capture_output=True, text=True, timeout=120)
     assert f"writing '{path}' failed after" in result.stdout, result.stdout + result.stderr

@@ -2,9 +2,9 @@
 
 import numpy as np
 import pytest
+from reference import apply_detector, detect
 
 from luckyao.lucky.detector import Detector, KeyedNoise
-from reference import apply_detector, detect
 
 
 def two_level_frames(k, n=64):
@@ -17,8 +17,7 @@ def two_level_frames(k, n=64):
 
 # 64 x 64 pixels: below 256 photons per frame the photon-by-photon sampler is used,
 # above it the per-pixel one; both must give independent Poisson pixels.
-NOISE_CASES = [(8000.0, 0.0), (8000.0, 0.1), (8000.0, 1.0), (400.0, 1.0), (200.0, 0.0),
-               (200.0, 0.1), (100.0, 1.0)]
+NOISE_CASES = [(8000.0, 0.0), (8000.0, 0.1), (8000.0, 1.0), (400.0, 1.0), (200.0, 0.0), (200.0, 0.1), (100.0, 1.0)]
 
 
 def _assert_poisson_plus_gaussian(electrons, frames, bright, photons, read_noise_e):
@@ -52,16 +51,14 @@ def test_mean_variance_and_skewness_match_poisson_plus_gaussian(photons, read_no
     _assert_poisson_plus_gaussian(electrons, frames, bright, photons, read_noise_e)
 
 
-@pytest.mark.parametrize("photons, read_noise_e", [(100.0, 0.0), (100.0, 0.1), (8000.0, 0.0),
-                                                   (8000.0, 0.1)])
+@pytest.mark.parametrize("photons, read_noise_e", [(100.0, 0.0), (100.0, 0.1), (8000.0, 0.0), (8000.0, 0.1)])
 def test_frame_totals_are_poisson(photons, read_noise_e):
     """Pixels are independent, so the frame total of n^2 = 4096 pixels has variance
     N + n^2 sigma^2 (a multinomial with a fixed total would give n^2 sigma^2). 2000
     frames: the variance estimator's relative standard error is ~sqrt(2 / 2000) = 3.2%;
     tolerance 5 of them."""
     frames, _ = two_level_frames(2000, 64)
-    electrons = apply_detector(frames, Detector("t", photons, read_noise_e),
-                               np.random.default_rng(9))
+    electrons = apply_detector(frames, Detector("t", photons, read_noise_e), np.random.default_rng(9))
     totals = electrons.sum(axis=(-2, -1), dtype=np.float64)
     variance = photons + 4096 * read_noise_e**2
     assert totals.mean() == pytest.approx(photons, abs=5 * np.sqrt(variance / 2000))
@@ -96,10 +93,15 @@ def test_noisy_does_not_mutate_and_is_reproducible():
     assert not np.array_equal(a, c)
 
 
-@pytest.mark.parametrize("kwargs", [dict(photons_per_frame=None, read_noise_e=1.0),
-                                    dict(photons_per_frame=0.0),
-                                    dict(photons_per_frame=-5.0),
-                                    dict(photons_per_frame=10.0, read_noise_e=-1.0)])
+@pytest.mark.parametrize(
+    "kwargs",
+    [
+        dict(photons_per_frame=None, read_noise_e=1.0),
+        dict(photons_per_frame=0.0),
+        dict(photons_per_frame=-5.0),
+        dict(photons_per_frame=10.0, read_noise_e=-1.0),
+    ],
+)
 def test_invalid_detectors_raise(kwargs):
     with pytest.raises(ValueError):
         Detector("bad", **kwargs)
@@ -141,6 +143,7 @@ def test_keyed_read_noise_is_standard_normal():
     against the normal distribution (p > 1e-3), and the tail beyond the ziggurat's base
     (|z| > 3.654) and beyond 4.5 as often as theory says (5 standard errors)."""
     from scipy import stats
+
     frames = np.full((1000, 64, 64), 1 / 4096, dtype=np.float32)
     z = detect(frames, Detector("rn", 1e-9, 1.0), seed=3).astype(np.float64).ravel()
     assert stats.kstest(z, "norm").pvalue > 1e-3
@@ -159,8 +162,9 @@ def test_keyed_streams_depend_on_seed_name_and_frame_only():
     detector = Detector("emccd", 500.0, 0.1)
     whole = detect(frames, detector, seed=5)
     np.testing.assert_array_equal(frames, before)
-    np.testing.assert_array_equal(np.concatenate([detect(frames[:3], detector, 5),
-                                                  detect(frames[3:], detector, 5, first_frame=3)]), whole)
+    np.testing.assert_array_equal(
+        np.concatenate([detect(frames[:3], detector, 5), detect(frames[3:], detector, 5, first_frame=3)]), whole
+    )
     assert not np.array_equal(detect(frames, detector, 6), whole)
     assert not np.array_equal(detect(frames, Detector("emccd2", 500.0, 0.1), 5), whole)
     assert not np.array_equal(whole[0], whole[1])  # same unit frame, another key
@@ -229,8 +233,9 @@ def test_photon_counting_probability_against_theory():
     assert set(np.unique(values)) <= {0.0, 1.0}
     expected = stats.poisson.pmf(0, lam) * stats.norm.sf(threshold / sigma)
     for electrons in range(1, 30):
-        above = integrate.quad(lambda x: stats.gamma.pdf(x, electrons) * stats.norm.sf((threshold - x) / sigma),
-                               0, np.inf)[0]
+        above = integrate.quad(
+            lambda x: stats.gamma.pdf(x, electrons) * stats.norm.sf((threshold - x) / sigma), 0, np.inf
+        )[0]
         expected += stats.poisson.pmf(electrons, lam) * above
     p = values.mean()
     assert p == pytest.approx(expected, abs=5 * np.sqrt(expected * (1 - expected) / values.size))
@@ -268,6 +273,7 @@ def test_vector_generators_step_as_xoshiro256pp():
     """The LANES generators stepped as one vector (:func:`.stream_vectors.xoshiro_fill`) give,
     value for value, the authors' scalar xoshiro256++ of each generator in turn, and leave its state."""
     from luckyao.lucky import noise_streams
+
     rng = np.random.default_rng(0)
     lanes = rng.integers(0, 2**63, (4, noise_streams.LANES), dtype=np.uint64) * np.uint64(2) + np.uint64(1)
     states = [[int(lanes[w, g]) for w in range(4)] for g in range(noise_streams.LANES)]
@@ -297,7 +303,7 @@ def test_rectangle_test_of_16_words_is_the_scalar_ziggurats():
                 failed[start + k] = (mask >> k) & 1
         return failed
 
-    words = np.random.default_rng(1).integers(-2**31, 2**31, 16 * 4096, dtype=np.int64).astype(np.int32)
+    words = np.random.default_rng(1).integers(-(2**31), 2**31, 16 * 4096, dtype=np.int64).astype(np.int32)
     layer, magnitude = words & 0xFF, (words >> 9) & 0x7FFFFF
     deviate = magnitude.astype(np.float32) * noise_streams._ZW[layer]
     deviate = np.where((words >> 8) & 1, -deviate, deviate)
@@ -317,6 +323,7 @@ def test_frame_sums_add_each_row_and_column_in_pixel_order(n):
     centre of gravity and the flux are made of: no reordering by the compiler), the peak the
     largest pixel."""
     from luckyao.lucky import noise_streams
+
     rng = np.random.default_rng(2)
     frames = (rng.standard_normal((3, n, n)) * 10.0 ** rng.uniform(-4, 4, (3, n, n))).astype(np.float32)
     rows, cols, peak = np.empty((3, n)), np.empty((3, n)), np.empty(3, np.float32)

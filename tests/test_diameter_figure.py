@@ -5,10 +5,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
-from luckyao.studyspec.study import load_study, validate_study
-from luckyao.figures import FIGURE_KINDS, FigureSettings
 from synthetic import lucky_dataset
+
+from luckyao.figures import FIGURE_KINDS, FigureSettings
+from luckyao.studyspec.study import load_study, validate_study
 
 CONFIG = Path(__file__).resolve().parents[1] / "config"
 N_FRAMES, N_BLOCKS = 100, 5
@@ -62,8 +62,15 @@ def test_two_cases_at_one_point_are_refused():
     config, _ = load_study(CONFIG / "config.yaml", CONFIG / "diameter.yaml")
     cases = validate_study(config)
     names = ["ltao_r0_13.5cm", "ltao_r0_15cm"]  # both LTAO, 22 km, 4.2 m
-    settings = FigureSettings.from_dict({"kind": "quality_vs_diameter", "cases": names, "criteria": ["strehl"],
-                                         "fractions": [0.1], "case_configs": {c: cases[c] for c in names}})
+    settings = FigureSettings.from_dict(
+        {
+            "kind": "quality_vs_diameter",
+            "cases": names,
+            "criteria": ["strehl"],
+            "fractions": [0.1],
+            "case_configs": {c: cases[c] for c in names},
+        }
+    )
     datasets = [lucky_dataset(0.1, N_BLOCKS, frame_strehl=np.zeros(N_FRAMES)) for _ in names]
     with pytest.raises(ValueError, match="both LTAO, LGS 22 km at 4.2 m"):
         FIGURE_KINDS["quality_vs_diameter"][0](settings, datasets)

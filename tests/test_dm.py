@@ -57,19 +57,17 @@ def measure_kappas(telescope: Telescope, orders) -> dict:
     grid, mask, points = pupil_points(telescope, telescope.diameter_m / SAMPLES_ACROSS)
     remover = TiltRemover(points[:, 0], points[:, 1])
     mirrors = {n: DeformableMirror(telescope, n) for n in orders}
-    fits = {n: (dm.influence_matrix(points[:, 0], points[:, 1]), dm.fit_matrix(points))
-            for n, dm in mirrors.items()}
+    fits = {n: (dm.influence_matrix(points[:, 0], points[:, 1]), dm.fit_matrix(points)) for n, dm in mirrors.items()}
     rng = np.random.default_rng(2024)
     n_pix, kappas = grid.n_pix, {n: [] for n in orders}
     for _ in range(6):
         for screen in fft_screens(512, grid.dx_m, rng):
             for y0 in (0, 512 - n_pix):
                 for x0 in (0, 512 - n_pix):
-                    phase = screen[y0:y0 + n_pix, x0:x0 + n_pix][mask]
+                    phase = screen[y0 : y0 + n_pix, x0 : x0 + n_pix][mask]
                     for n, (h, fit) in fits.items():
                         residual = remover.residual((phase - h @ (fit @ phase)).astype(np.float32))
-                        kappas[n].append(np.mean(residual.astype(float) ** 2)
-                                         / mirrors[n].pitch_m ** (5 / 3))
+                        kappas[n].append(np.mean(residual.astype(float) ** 2) / mirrors[n].pitch_m ** (5 / 3))
     return {n: np.array(values) for n, values in kappas.items()}
 
 
@@ -119,8 +117,11 @@ def test_fitting_error_scales_as_pitch_to_the_five_thirds(fitting_errors):
     means = {n: values.mean() for n, values in fitting_errors.items()}
     for coarse, fine in ((5, 9), (9, 17)):
         d_ratio = (TELESCOPE.diameter_m / (coarse - 1)) / (TELESCOPE.diameter_m / (fine - 1))
-        sigma2_ratio = (means[coarse] * (TELESCOPE.diameter_m / (coarse - 1)) ** (5 / 3)
-                        / (means[fine] * (TELESCOPE.diameter_m / (fine - 1)) ** (5 / 3)))
+        sigma2_ratio = (
+            means[coarse]
+            * (TELESCOPE.diameter_m / (coarse - 1)) ** (5 / 3)
+            / (means[fine] * (TELESCOPE.diameter_m / (fine - 1)) ** (5 / 3))
+        )
         assert sigma2_ratio == pytest.approx(d_ratio ** (5 / 3), rel=0.2)
 
 

@@ -10,14 +10,18 @@ import pytest
 import yaml
 from docutils.core import publish_parts
 
-from luckyao.studyspec.study import validate_study
 from luckyao.jobs.report import figure_caption, rst_text
+from luckyao.studyspec.study import validate_study
 
 pytestmark = pytest.mark.workflow  # runs Snakemake, a study or the command line: -m 'not workflow' skips it
 
 TINY = Path(__file__).resolve().parent / "data" / "tiny.yaml"
-HOSTILE = ["<script>alert(1)</script>", "x``\n\n.. raw:: html\n\n   <script>alert(2)</script>\n\n``",
-           "`click <javascript:alert(3)>`_", "*bold* :raw-html:`<b>` |sub| [#]_ \\"]
+HOSTILE = [
+    "<script>alert(1)</script>",
+    "x``\n\n.. raw:: html\n\n   <script>alert(2)</script>\n\n``",
+    "`click <javascript:alert(3)>`_",
+    "*bold* :raw-html:`<b>` |sub| [#]_ \\",
+]
 
 
 @pytest.mark.parametrize("text", HOSTILE)
@@ -46,21 +50,39 @@ def luckyao(*args):
     return subprocess.run([sys.executable, "-m", "luckyao", *args], capture_output=True, text=True, timeout=300)
 
 
-@pytest.mark.parametrize("args", [
-    ["table", "{tiny}"],
-    ["table", "{missing}"],
-    ["figure", "--id", "x", "--settings-file", "{missing}", "--out-prefix", "{tmp}/x"],
-    ["figure", "--id", "x", "--settings", "{{not json", "--out-prefix", "{tmp}/x"],
-    ["export", "{missing}", "--out", "{tmp}/x.fits"],
-    ["lucky", "--settings", "{{}}", "--frames", "{missing}", "--telemetry", "{missing}", "--out", "{tmp}/l.nc"],
-    ["simulate", "--case", "{{}}", "--name", "x", "--seed", "1", "--screens", "{missing}",
-     "--screens-metadata", "{missing}", "--frames", "{tmp}/f.nc", "--telemetry", "{tmp}/t.nc"],
-    ["turbulence", "--spec", "{{}}", "--screens", "{tmp}/s.npy", "--metadata", "{tmp}/s.nc"],
-    ["reconstructor", "--spec", "{{}}", "--out", "{tmp}/r.nc"],
-    ["commands", "--spec", "{{}}", "--out", "{tmp}/c.nc"],
-    ["verify", "{missing}"],
-    ["check", "{missing}"],
-])
+@pytest.mark.parametrize(
+    "args",
+    [
+        ["table", "{tiny}"],
+        ["table", "{missing}"],
+        ["figure", "--id", "x", "--settings-file", "{missing}", "--out-prefix", "{tmp}/x"],
+        ["figure", "--id", "x", "--settings", "{{not json", "--out-prefix", "{tmp}/x"],
+        ["export", "{missing}", "--out", "{tmp}/x.fits"],
+        ["lucky", "--settings", "{{}}", "--frames", "{missing}", "--telemetry", "{missing}", "--out", "{tmp}/l.nc"],
+        [
+            "simulate",
+            "--case",
+            "{{}}",
+            "--name",
+            "x",
+            "--seed",
+            "1",
+            "--screens",
+            "{missing}",
+            "--screens-metadata",
+            "{missing}",
+            "--frames",
+            "{tmp}/f.nc",
+            "--telemetry",
+            "{tmp}/t.nc",
+        ],
+        ["turbulence", "--spec", "{{}}", "--screens", "{tmp}/s.npy", "--metadata", "{tmp}/s.nc"],
+        ["reconstructor", "--spec", "{{}}", "--out", "{tmp}/r.nc"],
+        ["commands", "--spec", "{{}}", "--out", "{tmp}/c.nc"],
+        ["verify", "{missing}"],
+        ["check", "{missing}"],
+    ],
+)
 def test_every_subcommand_fails_in_one_line_without_a_traceback(args, tmp_path):
     """A wrong file or argument: exit status 1 and one line naming the problem."""
     names = {"tiny": str(TINY), "missing": str(tmp_path / "missing.nc"), "tmp": str(tmp_path)}
@@ -83,8 +105,8 @@ def test_the_eta_counts_from_the_first_chunk_not_from_the_compilation(monkeypatc
     monkeypatch.setattr(progress.time, "monotonic", lambda: next(clock))
     with caplog.at_level(logging.INFO, logger="luckyao.progress"):
         reporter = progress.Progress("frames", 1000, every_s=0)
-        reporter.update(10)   # t = 100 s: the compilation
-        reporter.update(20)   # t = 101 s
-        reporter.update(30)   # t = 102 s
+        reporter.update(10)  # t = 100 s: the compilation
+        reporter.update(20)  # t = 101 s
+        reporter.update(30)  # t = 102 s
     last = caplog.records[-1].getMessage()
     assert "10.0/s" in last and "ETA 97 s" in last, last

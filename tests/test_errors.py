@@ -14,7 +14,6 @@ error that ignored the correlation of successive frames, the naive std/sqrt(fram
 would be 3-5 x too small here, and fail).
 """
 
-
 import numpy as np
 import pytest
 from test_longexposure import CASE, SPEC
@@ -24,10 +23,10 @@ from luckyao.lucky.accumulation import batch_mean_error
 from luckyao.lucky.detector import Detector
 from luckyao.lucky.pipeline import run_lucky
 from luckyao.optics.imaging import Imager
+from luckyao.steps.screens import TurbulenceSpec, strip_specs
+from luckyao.steps.simulation import simulate
 from luckyao.studyspec.case import Case
 from luckyao.studyspec.schema import deep_merge
-from luckyao.steps.simulation import simulate
-from luckyao.steps.screens import TurbulenceSpec, strip_specs
 
 N_SEEDS = 12
 N_BLOCKS = 5
@@ -44,8 +43,9 @@ def seeds():
     system = Case.from_config(deep_merge(CASE, {"duration_s": DURATION_S, "atmosphere": {"wind_speed_m_s": WIND_M_S}}))
     runs = []
     for seed in range(N_SEEDS):
-        screens = ScreenSet.from_screens(specs, [strip_screen(s, 20.0, np.random.default_rng([100 + seed, i]))
-                                                 for i, s in enumerate(specs)])
+        screens = ScreenSet.from_screens(
+            specs, [strip_screen(s, 20.0, np.random.default_rng([100 + seed, i])) for i, s in enumerate(specs)]
+        )
         frames = []
         telemetry = simulate(system, screens, lambda start, f: frames.append(f[0].copy()))
         runs.append((telemetry.axis_strehl.values[0].astype(float), np.concatenate(frames)))
@@ -62,7 +62,10 @@ def test_long_exposure_error_from_time_blocks_matches_the_spread_over_seeds(seed
     errors = [batch_mean_error(axis, N_BLOCKS) for axis, _ in seeds]
     ratio = _ratio(values, errors)
     naive = np.sqrt(np.mean([np.var(axis, ddof=1) / len(axis) for axis, _ in seeds]))
-    print(f"long exposure: spread over seeds {np.std(values, ddof=1):.2e}, block error {np.sqrt(np.mean(np.square(errors))):.2e}, ratio {ratio:.2f}, naive {naive:.2e}")
+    print(
+        f"long exposure: spread over seeds {np.std(values, ddof=1):.2e}, "
+        f"block error {np.sqrt(np.mean(np.square(errors))):.2e}, ratio {ratio:.2f}, naive {naive:.2e}"
+    )
     assert 0.55 < ratio < 1.6, (ratio, np.std(values, ddof=1), errors)
     assert np.std(values, ddof=1) > 2 * naive  # frames are correlated: the naive error would fail
 
@@ -75,17 +78,30 @@ def test_lucky_image_errors_from_time_blocks_match_the_spread_over_seeds(seeds, 
     fractions = [0.1, 0.5]
     runs = []
     for _, frames in seeds:
-        chunks = lambda frames=frames: ((s, frames[s:s + 64]) for s in range(0, len(frames), 64))  # noqa: E731
-        runs.append(run_lucky(chunks, len(frames), [Detector("noiseless")], fractions, PEAK, 0.08, 1,
-                              image_crop_px=0, n_blocks=N_BLOCKS, progress_interval_s=1e9)
-                    .sel(detector="noiseless", criterion=criterion))
+        chunks = lambda frames=frames: ((s, frames[s : s + 64]) for s in range(0, len(frames), 64))  # noqa: E731
+        runs.append(
+            run_lucky(
+                chunks,
+                len(frames),
+                [Detector("noiseless")],
+                fractions,
+                PEAK,
+                0.08,
+                1,
+                image_crop_px=0,
+                n_blocks=N_BLOCKS,
+                progress_interval_s=1e9,
+            ).sel(detector="noiseless", criterion=criterion)
+        )
     for metric in ("strehl", "d50_arcsec"):
         for f in fractions:
             values = [float(r[metric].sel(fraction=f)) for r in runs]
             errors = [float(r[f"{metric}_error"].sel(fraction=f)) for r in runs]
             ratio = _ratio(values, errors)
-            print(f"{criterion} selection, {metric} at {f:.0%}: spread {np.std(values, ddof=1):.3g}, "
-                  f"block error {np.sqrt(np.mean(np.square(errors))):.3g}, ratio {ratio:.2f}")
+            print(
+                f"{criterion} selection, {metric} at {f:.0%}: spread {np.std(values, ddof=1):.3g}, "
+                f"block error {np.sqrt(np.mean(np.square(errors))):.3g}, ratio {ratio:.2f}"
+            )
             assert 0.55 < ratio < 1.6, (metric, f, ratio)
 
 

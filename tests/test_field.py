@@ -9,21 +9,21 @@ commands; the other targets are replayed from the screens and those commands.
 
 import numpy as np
 import pytest
+from reference import shift_frames
 
 from luckyao.atmosphere.screens import ScreenSet, strip_screen
+from luckyao.lucky.accumulation import recentring_shifts_px
 from luckyao.lucky.detector import Detector
 from luckyao.lucky.metrics import strehl
-from luckyao.lucky.accumulation import recentring_shifts_px
 from luckyao.lucky.pipeline import ImageReference, run_lucky
+from luckyao.steps.reconstructor import build_commands, build_reconstructors
+from luckyao.steps.screens import TurbulenceSpec, strip_specs
+from luckyao.steps.simulation import Replay, lgs_chain, simulate
 from luckyao.studyspec.case import Case
 from luckyao.studyspec.products import commands_spec, reconstructor_spec, turbulence_spec
-from luckyao.studyspec.schema import deep_merge
 from luckyao.studyspec.resolved import imaged_targets
+from luckyao.studyspec.schema import deep_merge
 from luckyao.studyspec.study import load_study
-from luckyao.steps.reconstructor import build_commands, build_reconstructors
-from luckyao.steps.simulation import Replay, lgs_chain, simulate
-from luckyao.steps.screens import TurbulenceSpec, strip_specs
-from reference import shift_frames
 
 DURATION_S = 0.4
 TARGETS_ARCSEC = [[0.0, 0.0], [20.0, 0.0], [40.0, 0.0]]
@@ -33,12 +33,20 @@ class _Field:
     def __init__(self):
         config, cases = load_study("config/config.yaml")
         # the raw centroids (wfs.calibration: none): the field's geometry does not depend on the slope gain
-        self.config = deep_merge(cases["ltao_r0_13.5cm"], {"duration_s": DURATION_S, "targets_arcsec": TARGETS_ARCSEC,
-                                                           "reference_target": 0, "wfs": {"calibration": "none"}})
+        self.config = deep_merge(
+            cases["ltao_r0_13.5cm"],
+            {
+                "duration_s": DURATION_S,
+                "targets_arcsec": TARGETS_ARCSEC,
+                "reference_target": 0,
+                "wfs": {"calibration": "none"},
+            },
+        )
         spec = dict(turbulence_spec(config, self.config), duration_s=DURATION_S + 0.05, max_pixel_m=0.033)
         specs = strip_specs(TurbulenceSpec.from_config(spec))
-        self.screens = ScreenSet.from_screens(specs, [strip_screen(s, spec["outer_scale_m"], np.random.default_rng(
-            [3, i])) for i, s in enumerate(specs)])
+        self.screens = ScreenSet.from_screens(
+            specs, [strip_screen(s, spec["outer_scale_m"], np.random.default_rng([3, i])) for i, s in enumerate(specs)]
+        )
         self.case = Case.from_config(self.config)
         self.reconstructors = build_reconstructors(reconstructor_spec(self.config))["reconstructor"].values
         products = build_commands(commands_spec(self.config))
@@ -47,8 +55,9 @@ class _Field:
     def run(self, imaged):
         sensor, estimator = lgs_chain(self.case, self.screens, self.reconstructors, seed=5)
         frames = []
-        telemetry = simulate(self.case, self.screens, lambda start, f: frames.append(f.copy()), sensor, estimator,
-                             self.commands, imaged)
+        telemetry = simulate(
+            self.case, self.screens, lambda start, f: frames.append(f.copy()), sensor, estimator, self.commands, imaged
+        )
         return telemetry, np.concatenate(frames, axis=1)
 
 
@@ -108,21 +117,26 @@ def test_off_axis_target_is_selected_and_recentred_by_the_star(field, runs):
     those indices, each shifted by the star's whole-pixel recentring."""
     (telemetry, all_frames), _ = runs
     n_frames, n = all_frames.shape[1], all_frames.shape[-1]
-    args = dict(detectors=[Detector("noiseless")], fractions=[0.25, 1.0], diffraction_limited_peak=1e-2,
-                pixel_scale_arcsec=field.case.camera.pixel_scale_arcsec, seed=1, image_crop_px=None)
+    args = dict(
+        detectors=[Detector("noiseless")],
+        fractions=[0.25, 1.0],
+        diffraction_limited_peak=1e-2,
+        pixel_scale_arcsec=field.case.camera.pixel_scale_arcsec,
+        seed=1,
+        image_crop_px=None,
+    )
 
     def chunks(target):
         return lambda: iter([(0, all_frames[target])])
 
     star = run_lucky(chunks(0), n_frames, **args)
     target = run_lucky(chunks(2), n_frames, reference=ImageReference.of(star), **args)
-    np.testing.assert_array_equal(target.frame_criterion.sel(criterion="strehl").values,
-                                  star.frame_strehl.values)
-    best = np.argsort(-star.frame_strehl.values[0], kind="stable")[:round(0.25 * n_frames)]
+    np.testing.assert_array_equal(target.frame_criterion.sel(criterion="strehl").values, star.frame_strehl.values)
+    best = np.argsort(-star.frame_strehl.values[0], kind="stable")[: round(0.25 * n_frames)]
     shifts = recentring_shifts_px(star.frame_centroid_px.values[0, best], n)
     expected = shift_frames(all_frames[2, best], shifts).sum(axis=0, dtype=np.float64)
     image = target.image.sel(criterion="strehl", fraction=0.25, detector="noiseless").values
     np.testing.assert_allclose(image, expected / expected.sum(), rtol=1e-5, atol=1e-9)
     # its own Strehl would select other frames (the reference is what changes the result)
-    own = np.argsort(-strehl(all_frames[2], 1e-2), kind="stable")[:len(best)]
+    own = np.argsort(-strehl(all_frames[2], 1e-2), kind="stable")[: len(best)]
     assert set(own) != set(best)

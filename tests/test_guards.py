@@ -7,10 +7,10 @@ import numpy as np
 import pytest
 import yaml
 
-from luckyao.studyspec.schema import ConfigError
-from luckyao.studyspec.study import validate_study
 from luckyao.io.datasets import FrameWriter
 from luckyao.steps.screens import read_screens, write_screens
+from luckyao.studyspec.schema import ConfigError
+from luckyao.studyspec.study import validate_study
 from luckyao.wfs.kernels import centroids
 
 TINY = Path(__file__).parent / "data" / "tiny.yaml"
@@ -52,8 +52,16 @@ def test_error_blocks_need_frames_and_fractions_are_distinct():
 
 def test_nan_in_the_screens_file_is_a_named_error(tmp_path):
     study = tiny()
-    spec = {"seed": 1, **study["turbulence"], "time_step_s": 0.0025, "diameter_m": 4.2, "outer_scale_m": 20.0,
-            "height_m": [0.0], "wind_speed_m_s": [10.0], "wind_direction_deg": [0.0]}
+    spec = {
+        "seed": 1,
+        **study["turbulence"],
+        "time_step_s": 0.0025,
+        "diameter_m": 4.2,
+        "outer_scale_m": 20.0,
+        "height_m": [0.0],
+        "wind_speed_m_s": [10.0],
+        "wind_direction_deg": [0.0],
+    }
     screens, metadata = tmp_path / "s.npy", tmp_path / "s.nc"
     write_screens(spec, screens, metadata, {})
     flat = np.load(screens, mmap_mode="r+")

@@ -1,11 +1,11 @@
 """LGS geometry: asterism, cone footprints, elongation."""
 
 import numpy as np
+from reference import elongation_length_rad
 
 from luckyao.geometry import cone_coordinates, footprint_scale
 from luckyao.units import ARCSEC_RAD
 from luckyao.wfs.beacons import LgsConfig, altitude_profile, elongation_offsets_rad
-from reference import elongation_length_rad
 
 
 def test_asterism_is_a_40_arcsec_circle():
@@ -74,6 +74,5 @@ def test_sodium_profile_is_gaussian_with_configured_fwhm():
 def test_off_axis_launch_shifts_the_elongation_origin():
     config = LgsConfig.rayleigh(launch_x_m=2.0)
     z_m, _ = altitude_profile(config, 3)
-    offsets = elongation_offsets_rad(np.array([[2.0, 0.0]]), config.launch_xy_m,
-                                     config.height_m, z_m)
+    offsets = elongation_offsets_rad(np.array([[2.0, 0.0]]), config.launch_xy_m, config.height_m, z_m)
     np.testing.assert_allclose(offsets, 0.0)  # sub-aperture at the launch sees a point

@@ -3,13 +3,13 @@
 import numpy as np
 
 from luckyao.atmosphere.screens import ScreenSet, strip_screen
+from luckyao.steps.reconstructor import build_reconstructors
+from luckyao.steps.screens import TurbulenceSpec, strip_specs
+from luckyao.steps.simulation import lgs_chain, simulate
 from luckyao.studyspec.case import Case
+from luckyao.studyspec.products import reconstructor_spec, turbulence_spec
 from luckyao.studyspec.schema import deep_merge
 from luckyao.studyspec.study import load_study
-from luckyao.studyspec.products import reconstructor_spec, turbulence_spec
-from luckyao.steps.reconstructor import build_reconstructors
-from luckyao.steps.simulation import lgs_chain, simulate
-from luckyao.steps.screens import TurbulenceSpec, strip_specs
 
 
 def test_lgs_rms_correlates_with_the_true_rms():
@@ -26,7 +26,8 @@ def test_lgs_rms_correlates_with_the_true_rms():
     spec = dict(turbulence_spec(study, case), duration_s=1.25, max_pixel_m=0.033)
     specs = strip_specs(TurbulenceSpec.from_config(spec))
     screens = ScreenSet.from_screens(
-        specs, [strip_screen(s, spec["outer_scale_m"], np.random.default_rng([5, i])) for i, s in enumerate(specs)])
+        specs, [strip_screen(s, spec["outer_scale_m"], np.random.default_rng([5, i])) for i, s in enumerate(specs)]
+    )
     reconstructors = build_reconstructors(reconstructor_spec(case))["reconstructor"].values
     system = Case.from_config(case)
     sensor, estimator = lgs_chain(system, screens, reconstructors, seed=5)

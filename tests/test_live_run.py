@@ -50,8 +50,13 @@ def test_the_study_command_leaves_a_live_run_alone(tmp_path, how):
     planted.parent.mkdir(parents=True)
     planted.write_bytes(b"a live job's half-written file")
     command, cwd = live_command(how, tmp_path)
-    live = subprocess.Popen([*command, "-s", str(REPO / "Snakefile"), "-d", str(workdir), "--cores", "1"], cwd=cwd,
-                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+    live = subprocess.Popen(
+        [*command, "-s", str(REPO / "Snakefile"), "-d", str(workdir), "--cores", "1"],
+        cwd=cwd,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+        start_new_session=True,
+    )
     try:
         locks = workdir / ".snakemake" / "locks"
         deadline = time.monotonic() + 120
@@ -59,8 +64,12 @@ def test_the_study_command_leaves_a_live_run_alone(tmp_path, how):
             assert live.poll() is None and time.monotonic() < deadline, "the live run never took its lock"
             time.sleep(0.05)
         os.killpg(live.pid, signal.SIGSTOP)
-        result = subprocess.run(["bash", str(REPO / "run.sh"), "study", "-d", str(workdir), "-n"],
-                                capture_output=True, text=True, timeout=300)
+        result = subprocess.run(
+            ["bash", str(REPO / "run.sh"), "study", "-d", str(workdir), "-n"],
+            capture_output=True,
+            text=True,
+            timeout=300,
+        )
         assert result.returncode == 0, result.stderr[-2000:]
         assert planted.exists(), "the live job's file was deleted"
         assert any(locks.iterdir()), "the live run's lock was removed"
@@ -70,8 +79,9 @@ def test_the_study_command_leaves_a_live_run_alone(tmp_path, how):
         live.wait()
 
 
-@pytest.mark.parametrize("argv", [["-d", "D"], ["-dD"], ["--directory", "D"], ["--directory=D"],
-                                  ["--cores", "2", "--dir", "D", "-n"]])
+@pytest.mark.parametrize(
+    "argv", [["-d", "D"], ["-dD"], ["--directory", "D"], ["--directory=D"], ["--cores", "2", "--dir", "D", "-n"]]
+)
 def test_every_form_of_the_directory_option_is_read(argv):
     assert study_folder(argv) == Path("D")
     assert study_folder(["--cores", "1"]) == Path(".")

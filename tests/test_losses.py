@@ -27,8 +27,18 @@ TINY = REPO / "tests" / "data" / "tiny.yaml"
 
 
 def snakemake(workdir: Path, *args, timeout=900):
-    command = [sys.executable, "-m", "snakemake", "-s", str(REPO / "Snakefile"), "-d", str(workdir),
-               "--cores", "2", *args]
+    command = [
+        sys.executable,
+        "-m",
+        "snakemake",
+        "-s",
+        str(REPO / "Snakefile"),
+        "-d",
+        str(workdir),
+        "--cores",
+        "2",
+        *args,
+    ]
     return subprocess.run(command, capture_output=True, text=True, timeout=timeout)
 
 
@@ -82,6 +92,7 @@ def product(workdir: Path, folder: str) -> Path:
 
 # --- 1. a set-aside or missing intermediate is remade, with what depends on it -----------------
 
+
 @pytest.mark.workflow
 def test_the_issues_reproduction_a_truncated_telemetry_is_remade_by_the_next_run(finished, tmp_path):
     """``truncate -s 20000 telemetry.nc``: the run fails and sets it aside; the next one remakes
@@ -112,16 +123,20 @@ SIMULATION = {"simulate", "lucky", "figure", "export"}
 
 
 @pytest.mark.workflow
-@pytest.mark.parametrize("what, consumer, outputs, expected", [
-    ("good/telemetry.nc", "good", ["lucky.nc"], {"simulate", "lucky", "figure", "export"}),
-    ("good/frames.nc", "good", ["lucky.nc"], {"simulate", "lucky", "figure", "export"}),
-    ("turbulence", "good", ["frames.nc", "telemetry.nc"], {"turbulence", "lgs_slopes", *SIMULATION}),
-    ("reconstructors", "ltao", ["frames.nc", "telemetry.nc"], {"reconstructor", *SIMULATION}),
-    ("commands", "ltao", ["frames.nc", "telemetry.nc"], {"commands", *SIMULATION}),
-    ("slopes", "ltao", ["frames.nc", "telemetry.nc"], {"lgs_slopes", *SIMULATION}),
-])
-def test_an_input_set_aside_by_a_failed_job_is_remade_with_what_depends_on_it(finished, tmp_path, what, consumer,
-                                                                                outputs, expected):
+@pytest.mark.parametrize(
+    "what, consumer, outputs, expected",
+    [
+        ("good/telemetry.nc", "good", ["lucky.nc"], {"simulate", "lucky", "figure", "export"}),
+        ("good/frames.nc", "good", ["lucky.nc"], {"simulate", "lucky", "figure", "export"}),
+        ("turbulence", "good", ["frames.nc", "telemetry.nc"], {"turbulence", "lgs_slopes", *SIMULATION}),
+        ("reconstructors", "ltao", ["frames.nc", "telemetry.nc"], {"reconstructor", *SIMULATION}),
+        ("commands", "ltao", ["frames.nc", "telemetry.nc"], {"commands", *SIMULATION}),
+        ("slopes", "ltao", ["frames.nc", "telemetry.nc"], {"lgs_slopes", *SIMULATION}),
+    ],
+)
+def test_an_input_set_aside_by_a_failed_job_is_remade_with_what_depends_on_it(
+    finished, tmp_path, what, consumer, outputs, expected
+):
     """The state a job leaves that found its input bad (truncated, NaN): the input set aside
     as ``.bad``, the job's own ``outputs`` deleted by Snakemake (the lucky job's, the
     simulation's). The next run remakes the input and the case, and redraws what shows it
@@ -138,8 +153,9 @@ def test_an_input_set_aside_by_a_failed_job_is_remade_with_what_depends_on_it(fi
 
 
 @pytest.mark.workflow
-@pytest.mark.parametrize("what, step", [("reconstructors", "reconstructor"), ("slopes", "lgs_slopes"),
-                                        ("turbulence", "turbulence")])
+@pytest.mark.parametrize(
+    "what, step", [("reconstructors", "reconstructor"), ("slopes", "lgs_slopes"), ("turbulence", "turbulence")]
+)
 def test_a_deleted_product_is_remade_and_what_read_it_rerun(finished, tmp_path, what, step):
     """A product deleted whose consumers' outputs are all there is remade, and the cases that
     read it rerun (the simulations read the LGS slopes as ``ancient``, yet a slopes product
@@ -154,7 +170,8 @@ def test_a_study_with_a_case_missing_is_not_archived(finished, tmp_path, capsys)
     """``luckyao archive`` names the case whose results are missing (before: archived without it)."""
     workdir = copy_of(finished, tmp_path)
     (workdir / "results" / "cases" / "good" / "telemetry.nc").rename(
-        workdir / "results" / "cases" / "good" / "telemetry.nc.bad")
+        workdir / "results" / "cases" / "good" / "telemetry.nc.bad"
+    )
     (workdir / "results" / "cases" / "good" / "lucky.nc").unlink()
     assert main(["archive", "--study-dir", str(workdir), "--out", str(tmp_path / "a.tar")]) == 1
     err = capsys.readouterr().err
@@ -164,6 +181,7 @@ def test_a_study_with_a_case_missing_is_not_archived(finished, tmp_path, capsys)
 
 
 # --- 2. NaN in lucky.nc: every reader refuses it, naming the variable and the index -------------
+
 
 def poke_nan(path: Path, detector: str) -> None:
     """NaN into the integrated Strehl of ``detector`` (first registration, criterion, fraction)."""
@@ -180,16 +198,20 @@ def test_nan_in_a_lucky_file_is_refused_by_the_figure_the_export_and_the_archive
     lucky = workdir / "results" / "cases" / "good" / "lucky.nc"
     poke_nan(lucky, "noiseless")
     message = r"variable 'strehl' is not finite at .*detector=\d \('noiseless'\)"
-    from luckyao.io.fits import export_fits
     from luckyao.figures import draw_figure
+    from luckyao.io.fits import export_fits
 
     with pytest.raises(ValueError, match=f"lucky file '{lucky}': {message}"):
         export_fits(lucky, tmp_path / "good.fits")
     assert not (tmp_path / "good.fits").exists()
     settings = sorted((workdir / "results" / "figures" / "settings").glob("table_*.json"))[-1]
     with pytest.raises(ValueError, match=message):
-        draw_figure("table", json.loads(settings.read_text()), [lucky, workdir / "results/cases/ltao/lucky.nc"],
-                    str(tmp_path / "table"))
+        draw_figure(
+            "table",
+            json.loads(settings.read_text()),
+            [lucky, workdir / "results/cases/ltao/lucky.nc"],
+            str(tmp_path / "table"),
+        )
     assert not (tmp_path / "table.nc").exists()
     assert main(["archive", "--study-dir", str(workdir), "--out", str(tmp_path / "a.tar")]) == 1
     assert "case 'good': lucky file" in capsys.readouterr().err
@@ -210,13 +232,19 @@ def test_nan_where_a_noisy_image_has_no_flux_is_accepted(finished, tmp_path):
 
 # --- 4. a command run by hand never moves, renames or writes what it reads ----------------------
 
+
 def test_export_of_a_file_that_is_not_a_lucky_dataset_leaves_it_alone(tmp_path):
     """``luckyao export README.md --out x.fits`` renamed README.md to README.md.bad."""
     readme = tmp_path / "README.md"
     shutil.copy(REPO / "README.md", readme)
     env = {k: v for k, v in os.environ.items() if k != STUDY_JOB}
-    done = subprocess.run([sys.executable, "-m", "luckyao", "export", "README.md", "--out", "x.fits"], cwd=tmp_path,
-                          capture_output=True, text=True, env=env)
+    done = subprocess.run(
+        [sys.executable, "-m", "luckyao", "export", "README.md", "--out", "x.fits"],
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        env=env,
+    )
     assert done.returncode == 1
     assert "README.md" in done.stderr and ".bad" not in done.stderr and "remakes" not in done.stderr
     assert readme.read_bytes() == (REPO / "README.md").read_bytes()
@@ -272,6 +300,7 @@ def test_a_job_sets_aside_only_files_of_its_study_folder(tmp_path, monkeypatch):
 
 # --- 5. every job holds the run lock: an orphaned job keeps the study locked ---------------------
 
+
 def children(pid: int) -> list[int]:
     """Every descendant of ``pid`` (Linux /proc)."""
     parents = {}
@@ -294,8 +323,12 @@ def holds_flock(pid: int, path: Path) -> bool:
     inode = path.stat().st_ino
     for line in Path("/proc/locks").read_text().splitlines():
         fields = line.split()
-        if len(fields) >= 6 and fields[1] == "FLOCK" and fields[4] == str(pid) \
-                and fields[5].rsplit(":", 1)[-1] == str(inode):
+        if (
+            len(fields) >= 6
+            and fields[1] == "FLOCK"
+            and fields[4] == str(pid)
+            and fields[5].rsplit(":", 1)[-1] == str(inode)
+        ):
             return True
     return False
 
@@ -315,9 +348,25 @@ def test_a_job_orphaned_by_a_killed_snakemake_keeps_the_study_locked(finished, t
     any hard kill. Before, run.sh called the lock stale and deleted the orphan's file."""
     workdir = copy_of(finished, tmp_path)
     lock = workdir / ".snakemake" / "luckyao-run.lock"
-    run = subprocess.Popen([sys.executable, "-m", "snakemake", "-s", str(REPO / "Snakefile"), "-d", str(workdir),
-                            "--cores", "1", "--forcerun", "lucky", "results/cases/good/lucky.nc"],
-                           stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+    run = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "snakemake",
+            "-s",
+            str(REPO / "Snakefile"),
+            "-d",
+            str(workdir),
+            "--cores",
+            "1",
+            "--forcerun",
+            "lucky",
+            "results/cases/good/lucky.nc",
+        ],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+        start_new_session=True,
+    )
     job, orphans = None, []
     try:
         deadline = time.monotonic() + 300
@@ -332,8 +381,12 @@ def test_a_job_orphaned_by_a_killed_snakemake_keeps_the_study_locked(finished, t
             os.kill(pid, signal.SIGSTOP)
         partial = workdir / "results" / "cases" / "good" / "lucky.nc.partial"
         partial.write_bytes(b"the orphan's half-written file")
-        result = subprocess.run(["bash", str(REPO / "run.sh"), "study", "-d", str(workdir), "-n"],
-                                capture_output=True, text=True, timeout=600)
+        result = subprocess.run(
+            ["bash", str(REPO / "run.sh"), "study", "-d", str(workdir), "-n"],
+            capture_output=True,
+            text=True,
+            timeout=600,
+        )
         assert "is using" in result.stderr, result.stderr[-2000:]
         assert partial.exists(), "the orphan's file was deleted"
         assert any((workdir / ".snakemake" / "locks").iterdir()), "the killed run's Snakemake lock was removed"
@@ -342,8 +395,12 @@ def test_a_job_orphaned_by_a_killed_snakemake_keeps_the_study_locked(finished, t
         deadline = time.monotonic() + 30
         while any(holds_flock(pid, lock) for pid in orphans) and time.monotonic() < deadline:
             time.sleep(0.05)
-        result = subprocess.run(["bash", str(REPO / "run.sh"), "study", "-d", str(workdir), "-n"],
-                                capture_output=True, text=True, timeout=600)
+        result = subprocess.run(
+            ["bash", str(REPO / "run.sh"), "study", "-d", str(workdir), "-n"],
+            capture_output=True,
+            text=True,
+            timeout=600,
+        )
         assert "is using" not in result.stderr and "stale lock" in result.stderr, result.stderr[-2000:]
         assert not partial.exists()
     finally:
@@ -384,8 +441,14 @@ def fake_checkout(tmp_path):
         log = tmp_path / "calls.log"
         log.unlink(missing_ok=True)
         env = dict(os.environ, PYTHON=str(script), FAKE_PYTHON_SCRIPT=str(script), FAKE_LOG=str(log))
-        done = subprocess.run(["bash", str(folder / "run.sh"), "test", "-q"], cwd=tmp_path, env=env,
-                              capture_output=True, text=True, timeout=60)
+        done = subprocess.run(
+            ["bash", str(folder / "run.sh"), "test", "-q"],
+            cwd=tmp_path,
+            env=env,
+            capture_output=True,
+            text=True,
+            timeout=60,
+        )
         assert done.returncode == 0, done.stderr
         return log.read_text().splitlines(), done.stderr
 
@@ -451,4 +514,3 @@ def test_a_venv_of_an_older_run_sh_is_judged_by_its_editable_install(fake_checko
     pth.write_text("/somewhere/else/src\n")
     calls, err = run(checkout)
     assert "built for /somewhere/else" in err and installs(calls)
-

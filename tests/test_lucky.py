@@ -2,6 +2,7 @@
 
 import numpy as np
 import pytest
+from reference import detect, shift_and_add, shift_frames
 
 from luckyao.lucky.accumulation import recentring_shifts_px
 from luckyao.lucky.detector import Detector
@@ -11,7 +12,6 @@ from luckyao.lucky.ranking import ExternalCriterion, fraction_counts, rank_frame
 from luckyao.optics.imaging import Camera, Imager
 from luckyao.optics.pupil import Telescope
 from luckyao.seeds import detector_key
-from reference import detect, shift_and_add, shift_frames
 
 
 def test_fraction_counts():
@@ -42,7 +42,7 @@ def test_selection_bins_keep_exactly_the_top_fractions():
 def compact_pattern(n, rng):
     """Non-negative asymmetric 5x5 pattern near the centre of an n x n frame."""
     image = np.zeros((n, n), dtype=np.float32)
-    image[n // 2 - 3: n // 2 + 2, n // 2 - 1: n // 2 + 4] = rng.random((5, 5)) + 0.1
+    image[n // 2 - 3 : n // 2 + 2, n // 2 - 1 : n // 2 + 4] = rng.random((5, 5)) + 0.1
     return image
 
 
@@ -60,8 +60,7 @@ def test_shift_and_add_is_exact_for_integer_shifts():
     np.testing.assert_allclose(shift_and_add(frames), expected, rtol=1e-6)
 
 
-@pytest.mark.parametrize("offset, lands_on_second", [(0.3, False), (0.7, True), (0.45, False),
-                                                     (0.55, True)])
+@pytest.mark.parametrize("offset, lands_on_second", [(0.3, False), (0.7, True), (0.45, False), (0.55, True)])
 def test_subpixel_centroid_rounds_to_nearest_pixel(offset, lands_on_second):
     """Two pixels at x0, x0+1 with weights (1-o, o): centroid x0+o. Nearest to n/2: x0 moves
     to n/2 if o < 1/2, x0+1 does if o > 1/2. Same in y with a vertical pair."""
@@ -69,8 +68,7 @@ def test_subpixel_centroid_rounds_to_nearest_pixel(offset, lands_on_second):
     frames = np.zeros((2, n, n), dtype=np.float32)
     frames[0, 5, 9], frames[0, 5, 10] = 1 - offset, offset
     frames[1, 11, 3], frames[1, 12, 3] = 1 - offset, offset
-    out = shift_frames(frames, recentring_shifts_px(
-        np.array([[5, 9 + offset], [11 + offset, 3]]), n))
+    out = shift_frames(frames, recentring_shifts_px(np.array([[5, 9 + offset], [11 + offset, 3]]), n))
     c = n // 2
     if lands_on_second:
         assert out[0, c, c] == np.float32(offset) and out[0, c, c - 1] == np.float32(1 - offset)
@@ -88,7 +86,7 @@ def test_shift_frames_has_roll_semantics():
 
 
 def chunker(frames, size):
-    return lambda: ((s, frames[s: s + size]) for s in range(0, len(frames), size))
+    return lambda: ((s, frames[s : s + size]) for s in range(0, len(frames), size))
 
 
 def brute_force_image(frames_e, order, count, centroid_frames=None):
@@ -100,8 +98,7 @@ def brute_force_image(frames_e, order, count, centroid_frames=None):
         frame = frames_e[f].astype(np.float64)
         ref = frame if centroid_frames is None else centroid_frames[f].astype(np.float64)
         c = [(ref.sum(axis=1 - a) * np.arange(n)).sum() / ref.sum() for a in (0, 1)]
-        total += np.roll(frame, (int(np.floor(n / 2 - c[0] + 0.5)),
-                                 int(np.floor(n / 2 - c[1] + 0.5))), axis=(0, 1))
+        total += np.roll(frame, (int(np.floor(n / 2 - c[0] + 0.5)), int(np.floor(n / 2 - c[1] + 0.5))), axis=(0, 1))
     return total / total.sum()
 
 
@@ -125,34 +122,47 @@ def test_run_lucky_matches_brute_force_for_every_criterion_and_fraction():
     detectors = [Detector("ideal"), Detector("emccd", 300.0, 0.1)]
     fractions = [0.05, 0.1, 0.25, 0.5, 1.0]
     peak = 1 / (2 * np.pi)
-    ds = run_lucky(chunker(frames, chunk), n_frames, detectors, fractions, peak, 0.02, seed,
-                   criteria_external=[external], image_crop_px=None, progress_interval_s=0)
+    ds = run_lucky(
+        chunker(frames, chunk),
+        n_frames,
+        detectors,
+        fractions,
+        peak,
+        0.02,
+        seed,
+        criteria_external=[external],
+        image_crop_px=None,
+        progress_interval_s=0,
+    )
     np.testing.assert_array_equal(frames, before)
     assert list(ds.criterion.values) == ["strehl", "d50", "lgs_rms"]
     for i, det in enumerate(detectors):
         noisy = detect(frames, det, seed)  # keyed per frame: the chunking does not matter
         np.testing.assert_allclose(ds.frame_strehl[i], strehl(noisy, peak), rtol=1e-12)
-        for name, values, larger in [("strehl", ds.frame_strehl[i].values, True),
-                                     ("d50", ds.frame_d50_arcsec[i].values, False),
-                                     ("lgs_rms", external.values, False)]:
+        for name, values, larger in [
+            ("strehl", ds.frame_strehl[i].values, True),
+            ("d50", ds.frame_d50_arcsec[i].values, False),
+            ("lgs_rms", external.values, False),
+        ]:
             sign = -1 if larger else 1
             order = sorted(range(n_frames), key=lambda f: (sign * values[f], f))
             for fraction, count in zip(fractions, fraction_counts(n_frames, fractions)):
                 expected = brute_force_image(noisy, order, count)
                 got = ds.image.sel(criterion=name, fraction=fraction, detector=det.name).values
                 np.testing.assert_allclose(got, expected, rtol=1e-5, atol=1e-7)
-                assert ds.strehl.sel(criterion=name, fraction=fraction, detector=det.name) == \
-                    pytest.approx(float(expected.max() / peak), rel=1e-5)
+                assert ds.strehl.sel(criterion=name, fraction=fraction, detector=det.name) == pytest.approx(
+                    float(expected.max() / peak), rel=1e-5
+                )
                 clean = brute_force_image(frames, order, count, centroid_frames=noisy)
-                assert ds.strehl_noiseless.sel(criterion=name, fraction=fraction,
-                                               detector=det.name) == \
-                    pytest.approx(float(clean.max() / peak), rel=1e-5)
+                assert ds.strehl_noiseless.sel(criterion=name, fraction=fraction, detector=det.name) == pytest.approx(
+                    float(clean.max() / peak), rel=1e-5
+                )
         everything = brute_force_image(noisy, list(range(n_frames)), n_frames)
-        np.testing.assert_allclose(ds.long_exposure_image.sel(recentring="cog")[i], everything,
-                                   rtol=1e-5, atol=1e-7)
+        np.testing.assert_allclose(ds.long_exposure_image.sel(recentring="cog")[i], everything, rtol=1e-5, atol=1e-7)
         plain = noisy.sum(axis=0, dtype=np.float64)
-        np.testing.assert_allclose(ds.long_exposure_image.sel(recentring="none")[i],
-                                   plain / plain.sum(), rtol=1e-5, atol=1e-7)
+        np.testing.assert_allclose(
+            ds.long_exposure_image.sel(recentring="none")[i], plain / plain.sum(), rtol=1e-5, atol=1e-7
+        )
 
 
 def test_guessed_bins_of_noisy_frames_are_corrected_to_each_block_and_run_selection():
@@ -168,19 +178,33 @@ def test_guessed_bins_of_noisy_frames_are_corrected_to_each_block_and_run_select
     sigma = 1.0 + 2.0 * np.abs(np.sin(np.arange(n_frames) / 7.0)) + rng.uniform(0, 0.3, n_frames)  # drifting
     pos = rng.uniform(10, 22, size=(n_frames, 2))
     idx = np.arange(n)
-    frames = np.exp(-((idx[None, :, None] - pos[:, 0, None, None]) ** 2
-                      + (idx[None, None, :] - pos[:, 1, None, None]) ** 2) / (2 * sigma[:, None, None] ** 2))
+    frames = np.exp(
+        -((idx[None, :, None] - pos[:, 0, None, None]) ** 2 + (idx[None, None, :] - pos[:, 1, None, None]) ** 2)
+        / (2 * sigma[:, None, None] ** 2)
+    )
     frames = (frames / frames.sum(axis=(1, 2), keepdims=True)).astype(np.float32)
     det = Detector("emccd", 2000.0, 0.1)
     fractions = [0.1, 0.3, 0.5, 1.0]
     peak = 1 / (2 * np.pi)
-    ds = run_lucky(chunker(frames, chunk), n_frames, [Detector("ideal"), det, Detector("bright", 1e12)],
-                   fractions, peak, 0.02, seed, image_crop_px=None, n_blocks=n_blocks, progress_interval_s=0)
+    ds = run_lucky(
+        chunker(frames, chunk),
+        n_frames,
+        [Detector("ideal"), det, Detector("bright", 1e12)],
+        fractions,
+        peak,
+        0.02,
+        seed,
+        image_crop_px=None,
+        n_blocks=n_blocks,
+        progress_interval_s=0,
+    )
     ideal_drawn, emccd_drawn, bright_drawn = ds.attrs["frames_drawn_again"]
     assert ideal_drawn == 0 and 0 < emccd_drawn < n_frames and bright_drawn == 0
     for name in ("strehl", "d50"):
-        np.testing.assert_array_equal(rank_frames(ds.frame_criterion.sel(criterion=name, detector="bright"), True),
-                                      rank_frames(ds.frame_criterion.sel(criterion=name, detector="ideal"), True))
+        np.testing.assert_array_equal(
+            rank_frames(ds.frame_criterion.sel(criterion=name, detector="bright"), True),
+            rank_frames(ds.frame_criterion.sel(criterion=name, detector="ideal"), True),
+        )
     noisy = detect(frames, det, seed)
     per_block = n_frames // n_blocks
     for name, larger in (("strehl", True), ("d50", False)):
@@ -191,13 +215,17 @@ def test_guessed_bins_of_noisy_frames_are_corrected_to_each_block_and_run_select
             order = sorted(frame_ids, key=lambda f: ((-1 if larger else 1) * values[f], f))
             for fraction, count in zip(fractions, fraction_counts(count_of, fractions)):
                 expected = brute_force_image(noisy, order, count)
-                got = ds.strehl.sel(criterion=name, fraction=fraction, detector="emccd") if block is None else \
-                    ds.strehl_block.sel(block=block, criterion=name, fraction=fraction, detector="emccd")
+                got = (
+                    ds.strehl.sel(criterion=name, fraction=fraction, detector="emccd")
+                    if block is None
+                    else ds.strehl_block.sel(block=block, criterion=name, fraction=fraction, detector="emccd")
+                )
                 assert float(got) == pytest.approx(float(expected.max() / peak), rel=1e-9), (block, name, fraction)
                 if block is None:
                     clean = brute_force_image(frames, order, count, centroid_frames=noisy)
-                    assert float(ds.strehl_noiseless.sel(criterion=name, fraction=fraction, detector="emccd")) == \
-                        pytest.approx(float(clean.max() / peak), rel=1e-9)
+                    assert float(
+                        ds.strehl_noiseless.sel(criterion=name, fraction=fraction, detector="emccd")
+                    ) == pytest.approx(float(clean.max() / peak), rel=1e-9)
 
 
 def test_noiseless_selection_picks_the_sharpest_frames():
@@ -210,11 +238,11 @@ def test_noiseless_selection_picks_the_sharpest_frames():
     r2 = idx[:, None] ** 2 + idx[None, :] ** 2
     frames = np.exp(-r2[None] / (2 * sigma[:, None, None] ** 2))
     frames = (frames / frames.sum(axis=(1, 2), keepdims=True)).astype(np.float32)
-    ds = run_lucky(chunker(frames, 6), n_frames, [Detector("ideal")], [0.25, 1.0],
-                   1 / (2 * np.pi), 1.0, 0, image_crop_px=None)
+    ds = run_lucky(
+        chunker(frames, 6), n_frames, [Detector("ideal")], [0.25, 1.0], 1 / (2 * np.pi), 1.0, 0, image_crop_px=None
+    )
     np.testing.assert_allclose(ds.frame_strehl[0], 1 / sigma**2, rtol=1e-3)
-    np.testing.assert_allclose(ds.frame_d50_arcsec[0], 2 * sigma * np.sqrt(2 * np.log(2)),
-                               rtol=2e-3)
+    np.testing.assert_allclose(ds.frame_d50_arcsec[0], 2 * sigma * np.sqrt(2 * np.log(2)), rtol=2e-3)
     best = np.sort(np.argsort(sigma)[:5])
     expected = frames[best].sum(axis=0, dtype=np.float64)
     for name in ("strehl", "d50"):
@@ -228,10 +256,16 @@ def test_long_exposure_strehl_of_wandering_diffraction_limited_images():
     diffraction-limited one (Strehl 1/2, plus the other image's wing there, < 1e-2)."""
     imager = Imager(Telescope(4.2, 1.2), Camera(800e-9, 64, 5 / 256))
     dl = imager.diffraction_limited
-    frames = np.stack([np.roll(dl, (6, 9), axis=(0, 1))] * 5
-                      + [np.roll(dl, (-7, -4), axis=(0, 1))] * 5)
-    ds = run_lucky(chunker(frames, 4), 10, [Detector("ideal")], [0.5, 1.0],
-                   imager.diffraction_limited_peak, imager.camera.pixel_scale_arcsec, 0)
+    frames = np.stack([np.roll(dl, (6, 9), axis=(0, 1))] * 5 + [np.roll(dl, (-7, -4), axis=(0, 1))] * 5)
+    ds = run_lucky(
+        chunker(frames, 4),
+        10,
+        [Detector("ideal")],
+        [0.5, 1.0],
+        imager.diffraction_limited_peak,
+        imager.camera.pixel_scale_arcsec,
+        0,
+    )
     s = ds.long_exposure_strehl.sel(detector="ideal")
     assert float(s.sel(recentring="cog")) == pytest.approx(1.0, abs=1e-6)
     assert float(s.sel(recentring="none")) == pytest.approx(0.5, abs=1e-2)
@@ -241,8 +275,7 @@ def test_long_exposure_strehl_of_wandering_diffraction_limited_images():
 def test_dataset_is_cf_labelled():
     frames = np.zeros((4, 16, 16), dtype=np.float32)
     frames[:, 8, 8] = 1.0
-    ds = run_lucky(chunker(frames, 4), 4, [Detector("ideal"), Detector("scmos", 100.0, 1.0)],
-                   [0.5, 1.0], 1.0, 0.02, 0)
+    ds = run_lucky(chunker(frames, 4), 4, [Detector("ideal"), Detector("scmos", 100.0, 1.0)], [0.5, 1.0], 1.0, 0.02, 0)
     assert ds.strehl.dims == ("criterion", "fraction", "detector")
     assert ds.long_exposure_strehl.dims == ("recentring", "detector")
     for name in list(ds.data_vars) + list(ds.coords):
@@ -277,8 +310,7 @@ def test_detector_noise_depends_on_its_name_only():
     frames /= frames.sum(axis=(1, 2), keepdims=True)
 
     def run(detectors):
-        return run_lucky(chunker(frames, 5), n_frames, detectors, [0.25, 1.0], 0.1, 0.02, 7,
-                         progress_interval_s=0)
+        return run_lucky(chunker(frames, 5), n_frames, detectors, [0.25, 1.0], 0.1, 0.02, 7, progress_interval_s=0)
 
     a = Detector("a", 300.0, 1.0)
     alone = run([a])
@@ -308,15 +340,25 @@ def cube():
     sigma = rng.uniform(0.3, 1.7, N_CUBE)
     x, y = (c[imager.mask] for c in imager.grid.xy_m)
     tilt_rad = rng.integers(-5, 6, (N_CUBE, 2)) * imager.camera.pixel_scale_rad
-    phase = (sigma[:, None] * rng.standard_normal((N_CUBE, imager.n_valid))
-             + 2 * np.pi * (tilt_rad[:, :1] * y + tilt_rad[:, 1:] * x) / 800e-9)
+    phase = (
+        sigma[:, None] * rng.standard_normal((N_CUBE, imager.n_valid))
+        + 2 * np.pi * (tilt_rad[:, :1] * y + tilt_rad[:, 1:] * x) / 800e-9
+    )
     frames = imager.image(phase.astype(np.float32))
     detectors = [Detector("ideal"), Detector("bright", 1e10, 0.1), Detector("faint", 0.05, 1.0)]
     external = ExternalCriterion("lgs_rms", 100 * sigma, False, "nm")
     peak = imager.diffraction_limited_peak
-    ds = run_lucky(chunker(frames, 20), N_CUBE, detectors, FRACTIONS_CUBE, peak,
-                   imager.camera.pixel_scale_arcsec, 5, criteria_external=[external],
-                   progress_interval_s=0)
+    ds = run_lucky(
+        chunker(frames, 20),
+        N_CUBE,
+        detectors,
+        FRACTIONS_CUBE,
+        peak,
+        imager.camera.pixel_scale_arcsec,
+        5,
+        criteria_external=[external],
+        progress_interval_s=0,
+    )
     return frames, peak, imager.camera.pixel_scale_arcsec, external, ds
 
 
@@ -330,8 +372,17 @@ def test_noiseless_detector_noiseless_scores_are_its_scores_bit_for_bit(cube):
         np.testing.assert_array_equal(ideal[name], ideal[f"{name}_noiseless"], err_msg=name)
         assert ds[f"{name}_noiseless"].attrs["units"] == ds[name].attrs["units"]
         assert "noiseless frames" in ds[f"{name}_noiseless"].attrs["long_name"]
-    alone = run_lucky(chunker(frames, 20), N_CUBE, [Detector("ideal")], FRACTIONS_CUBE, peak,
-                      scale, 5, criteria_external=[external], progress_interval_s=0)
+    alone = run_lucky(
+        chunker(frames, 20),
+        N_CUBE,
+        [Detector("ideal")],
+        FRACTIONS_CUBE,
+        peak,
+        scale,
+        5,
+        criteria_external=[external],
+        progress_interval_s=0,
+    )
     assert_detector_unchanged(alone, ds, "ideal")
 
 
@@ -355,13 +406,14 @@ def test_very_bright_detector_converges_to_noiseless(cube):
         c = ds.criterion.values.tolist().index(criterion)
         np.testing.assert_array_equal(
             rank_frames(bright.frame_criterion[c], bool(ds.larger_is_better[c])),
-            rank_frames(ideal.frame_criterion[c], bool(ds.larger_is_better[c])))
-    np.testing.assert_array_equal(recentring_shifts_px(bright.frame_centroid_px, 64),
-                                  recentring_shifts_px(ideal.frame_centroid_px, 64))
+            rank_frames(ideal.frame_criterion[c], bool(ds.larger_is_better[c])),
+        )
+    np.testing.assert_array_equal(
+        recentring_shifts_px(bright.frame_centroid_px, 64), recentring_shifts_px(ideal.frame_centroid_px, 64)
+    )
     for name in ("strehl", "fwhm_arcsec", "d50_arcsec"):
         np.testing.assert_allclose(bright[name], ideal[name], rtol=5 * eps, err_msg=name)
-        np.testing.assert_allclose(bright[f"{name}_noiseless"], ideal[name], rtol=1e-6,
-                                   err_msg=name)
+        np.testing.assert_allclose(bright[f"{name}_noiseless"], ideal[name], rtol=1e-6, err_msg=name)
 
 
 def test_vanishing_signal_selects_at_random_but_external_criterion_does_not(cube):
@@ -382,14 +434,14 @@ def test_vanishing_signal_selects_at_random_but_external_criterion_does_not(cube
     true_strehl = strehl(frames, peak)  # circular shifts leave a frame's Strehl unchanged
     faint, ideal = ds.sel(detector="faint"), ds.sel(detector="ideal")
     by_quality = rank_frames(external.values, larger_is_better=False)
-    shifts = {d: recentring_shifts_px(ds.frame_centroid_px.sel(detector=d).values, 64)
-              for d in ("faint", "ideal")}
+    shifts = {d: recentring_shifts_px(ds.frame_centroid_px.sel(detector=d).values, 64) for d in ("faint", "ideal")}
     assert np.mean(np.any(shifts["faint"] != shifts["ideal"], axis=1)) > 0.8  # noise
     moved = {d: shift_frames(frames, s).astype(np.float64) for d, s in shifts.items()}
     for fraction, count in zip(FRACTIONS_CUBE, fraction_counts(N_CUBE, FRACTIONS_CUBE)):
         expected = strehl(moved["faint"][by_quality[:count]].sum(axis=0), peak)
-        assert float(faint.strehl_noiseless.sel(criterion="lgs_rms", fraction=fraction)) == \
-            pytest.approx(expected, rel=1e-6)
+        assert float(faint.strehl_noiseless.sel(criterion="lgs_rms", fraction=fraction)) == pytest.approx(
+            expected, rel=1e-6
+        )
     one = FRACTIONS_CUBE[0]
     best = ds.strehl_noiseless.sel(criterion="lgs_rms", fraction=one).values
     np.testing.assert_allclose(best, true_strehl.max(), rtol=1e-6)  # every detector
@@ -405,5 +457,4 @@ def test_vanishing_signal_selects_at_random_but_external_criterion_does_not(cube
     got = float(faint.strehl_noiseless.sel(criterion="strehl", fraction=0.1))
     lo, hi = np.quantile(null("faint"), [0.005, 0.995])
     assert lo < got < hi
-    assert float(ideal.strehl_noiseless.sel(criterion="strehl", fraction=0.1)) > \
-        null("ideal").max()
+    assert float(ideal.strehl_noiseless.sel(criterion="strehl", fraction=0.1)) > null("ideal").max()

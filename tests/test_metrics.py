@@ -2,6 +2,7 @@
 
 import numpy as np
 import pytest
+from reference import d50_arcsec
 from scipy import integrate, optimize, special
 
 from luckyao.lucky import radial_sums
@@ -12,7 +13,6 @@ from luckyao.lucky.metrics import (
     interpolant_patch,
     strehl,
 )
-from reference import d50_arcsec
 from luckyao.optics.imaging import Camera, Imager
 from luckyao.optics.pupil import Telescope, TiltRemover
 from luckyao.units import ARCSEC_RAD
@@ -34,16 +34,19 @@ def airy_half_maximum_x(eps=EPS):
 
 def airy_ee(x, eps=EPS):
     """Encircled energy fraction within x: radial integral over the total 2 (1 - eps^2)."""
-    return integrate.quad(lambda t: annular_amplitude(t, eps) ** 2 * t, 0, x, limit=200)[0] / (
-        2 * (1 - eps**2))
+    return integrate.quad(lambda t: annular_amplitude(t, eps) ** 2 * t, 0, x, limit=200)[0] / (2 * (1 - eps**2))
 
 
 def airy_ee_mahajan(x, eps=EPS):
     """Closed form of the annular encircled energy (Mahajan, JOSA A 3, 470, 1986, eq. 13)."""
     tail = integrate.quad(lambda t: special.j1(t) * special.j1(eps * t) / t, 0, x, limit=200)[0]
-    return (1 - special.j0(x) ** 2 - special.j1(x) ** 2
-            + eps**2 * (1 - special.j0(eps * x) ** 2 - special.j1(eps * x) ** 2)
-            - 4 * eps * tail) / (1 - eps**2)
+    return (
+        1
+        - special.j0(x) ** 2
+        - special.j1(x) ** 2
+        + eps**2 * (1 - special.j0(eps * x) ** 2 - special.j1(eps * x) ** 2)
+        - 4 * eps * tail
+    ) / (1 - eps**2)
 
 
 def airy_d50_x(eps=EPS):
@@ -117,8 +120,7 @@ def test_strehl_of_small_defocus_follows_marechal():
     sigma_rad = 0.2
     phase = sigma_rad * focus / np.sqrt(np.mean(focus**2))
     image = imager.image(phase[None, :].astype(np.float32))[0]
-    assert strehl(image, imager.diffraction_limited_peak) == pytest.approx(
-        np.exp(-sigma_rad**2), abs=3e-3)
+    assert strehl(image, imager.diffraction_limited_peak) == pytest.approx(np.exp(-(sigma_rad**2)), abs=3e-3)
 
 
 def gaussian_images(n, centres_yx, sigma_px):
@@ -133,8 +135,7 @@ def gaussian_images(n, centres_yx, sigma_px):
 
 def test_centroid_of_gaussians_is_their_centre():
     """A sampled Gaussian of sigma 2 px has its centre of gravity at its centre (Poisson sum)."""
-    centres = np.array([[32.0, 32.0], [20.3, 40.75], [40.5, 25.1], [31.9, 30.2], [33, 29.6],
-                        [25.25, 35.5]])
+    centres = np.array([[32.0, 32.0], [20.3, 40.75], [40.5, 25.1], [31.9, 30.2], [33, 29.6], [25.25, 35.5]])
     images = gaussian_images(64, centres, 2.0).reshape(2, 3, 64, 64)
     assert centroid_px(images).shape == (2, 3, 2)
     np.testing.assert_allclose(centroid_px(images).reshape(-1, 2), centres, atol=1e-4)
@@ -160,8 +161,9 @@ def test_encircled_energy_of_uniform_image_is_disc_area():
     n = 32
     ee = EncircledEnergy(n)
     fractions = ee.fractions(np.ones((2, n, n), dtype=np.float32))
-    np.testing.assert_allclose(fractions, np.broadcast_to(np.pi * ee.radii_px**2 / n**2,
-                                                          fractions.shape), rtol=1e-5, atol=1e-7)
+    np.testing.assert_allclose(
+        fractions, np.broadcast_to(np.pi * ee.radii_px**2 / n**2, fractions.shape), rtol=1e-5, atol=1e-7
+    )
     assert np.allclose(ee.radius_px(np.ones((n, n))), np.sqrt(0.5 * n**2 / np.pi), rtol=1e-6)
 
 
@@ -199,8 +201,9 @@ def test_binned_encircled_energy_is_the_same_sum():
     ee = EncircledEnergy(64)
     centres = np.array([[32.0, 32.0], [30.37, 33.81], [34.5, 29.5]])
     images = gaussian_images(64, centres, 1.2)
-    noisy = (np.random.default_rng(4).poisson(500 * images) + np.random.default_rng(5).normal(
-        0, 1, images.shape)).astype(np.float32)
+    noisy = (
+        np.random.default_rng(4).poisson(500 * images) + np.random.default_rng(5).normal(0, 1, images.shape)
+    ).astype(np.float32)
     for frames in (images, noisy):
         c = centroid_px(frames)
         np.testing.assert_allclose(ee.fractions_binned(frames, c), ee.fractions(frames, c), atol=2e-5)
@@ -222,13 +225,18 @@ def test_radial_sums_about_several_centres_give_each_centres_encircled_energy():
     for m in range(5):
         one = ee.energies_binned(images, centres[:, m])
         np.testing.assert_allclose(about[:, m], one, rtol=0, atol=1e-12 * np.abs(one).max())
-        np.testing.assert_allclose(ee.fractions_of(one, images.sum(axis=(1, 2), dtype=np.float64)),
-                                   ee.fractions(images, centres[:, m]), atol=2e-5)
+        np.testing.assert_allclose(
+            ee.fractions_of(one, images.sum(axis=(1, 2), dtype=np.float64)),
+            ee.fractions(images, centres[:, m]),
+            atol=2e-5,
+        )
     same_centre = np.repeat(centres[:1, :1], 3, axis=0)
     summed = ee.radial_sums_about(images.sum(axis=0, keepdims=True), same_centre[:1])
     each = ee.radial_sums_about(images, same_centre)[:, 0].sum(axis=0)
     np.testing.assert_allclose(summed[0, 0], each, rtol=0, atol=1e-6 * np.abs(each).max())  # float32 FFTs
-    np.testing.assert_array_equal(ee.radial_sums_about(images, centres, which=[2]), ee.radial_sums_about(images, centres)[2:])
+    np.testing.assert_array_equal(
+        ee.radial_sums_about(images, centres, which=[2]), ee.radial_sums_about(images, centres)[2:]
+    )
 
 
 def test_radial_sums_of_a_centre_are_the_same_alone_or_among_others():
@@ -236,8 +244,9 @@ def test_radial_sums_of_a_centre_are_the_same_alone_or_among_others():
     many (radial_sums.RADIAL_CENTRES_INNER): the same operations on each term, so a centre's sums are
     bit for bit the same alone, among a few or among many."""
     ee = EncircledEnergy(64)
-    image = np.random.default_rng(7).poisson(300 * gaussian_images(64, np.array([[31.2, 32.6]]), 1.5)).astype(
-        np.float32)
+    image = (
+        np.random.default_rng(7).poisson(300 * gaussian_images(64, np.array([[31.2, 32.6]]), 1.5)).astype(np.float32)
+    )
     centres = np.random.default_rng(8).uniform(26, 38, (1, 2 * radial_sums.RADIAL_CENTRES_INNER + 3, 2))
     many = ee.radial_sums_about(image, centres)[0]
     for m in (1, 3, radial_sums.RADIAL_CENTRES_INNER - 1, radial_sums.RADIAL_CENTRES_INNER):
@@ -260,7 +269,7 @@ def test_interpolant_patch_is_the_matrix_fourier_transform(shape, up):
     expected = (ey @ (np.fft.fft2(image) / image.size) @ ex).real
     patch = interpolant_patch(image, jy, jx, up)
     np.testing.assert_allclose(patch, expected, rtol=0, atol=1e-13 * np.abs(expected).max())
-    whole = patch[2 * up::up, up + 1::up][:ny, :nx]  # (y, x) = whole pixels 0.., 0..
+    whole = patch[2 * up :: up, up + 1 :: up][:ny, :nx]  # (y, x) = whole pixels 0.., 0..
     np.testing.assert_allclose(whole, image, rtol=0, atol=1e-13 * np.abs(image).max())
 
 
@@ -278,6 +287,7 @@ def test_component_and_dilation_kernels_match_scipy():
     from scipy import ndimage
 
     from luckyao.lucky.image_helpers import component, dilate
+
     rng = np.random.default_rng(3)
     for _ in range(20):
         values = ndimage.uniform_filter(rng.random((40, 37)), 3)
@@ -311,6 +321,8 @@ def test_airy_metrics_at_the_sampling_derived_for_each_diameter(diameter_m):
     image = imager.diffraction_limited
     assert strehl(image, imager.diffraction_limited_peak) == pytest.approx(1.0, abs=1e-6)
     assert fwhm_arcsec(image, imager.camera.pixel_scale_arcsec) == pytest.approx(
-        2 * airy_half_maximum_x(eps) / np.pi * lambda_over_d, rel=TOLERANCE)
+        2 * airy_half_maximum_x(eps) / np.pi * lambda_over_d, rel=TOLERANCE
+    )
     assert d50_arcsec(image, imager.camera.pixel_scale_arcsec) == pytest.approx(
-        2 * airy_d50_x(eps) / np.pi * lambda_over_d, rel=TOLERANCE)
+        2 * airy_d50_x(eps) / np.pi * lambda_over_d, rel=TOLERANCE
+    )

@@ -12,8 +12,7 @@ TINY = Path(__file__).parent / "data" / "tiny.yaml"
 
 
 def test_sweep_is_a_log_grid_of_signal_for_every_read_noise():
-    lucky = {"detector_sweep": {"photons_per_frame": {"min": 10, "max": 1e5, "levels": 9},
-                                "read_noise_e": [0.1, 1.0]}}
+    lucky = {"detector_sweep": {"photons_per_frame": {"min": 10, "max": 1e5, "levels": 9}, "read_noise_e": [0.1, 1.0]}}
     detectors = sweep_detectors(lucky)
     assert len(detectors) == 18
     for read_noise in (0.1, 1.0):

@@ -44,12 +44,17 @@ def check(capsys, *paths) -> tuple[int, str]:
 def with_sweep(parameters: dict) -> dict:
     study = tiny()
     study["sweeps"]["grid"] = {"parameters": parameters}
-    study["figures"]["grid"] = {"kind": "quality_vs_parameter", "sweep": "grid", "criteria": ["strehl"],
-                                "fractions": [1.0]}
+    study["figures"]["grid"] = {
+        "kind": "quality_vs_parameter",
+        "sweep": "grid",
+        "criteria": ["strehl"],
+        "fractions": [1.0],
+    }
     return study
 
 
 # --- detector names (item 3) ---------------------------------------------------------------
+
 
 def test_a_detector_named_like_a_sweep_detector_is_refused_by_key():
     """The tiny study's sweep names rn0.1_100ph: a listed detector of that name would be
@@ -65,8 +70,11 @@ def test_a_detector_named_like_a_sweep_detector_is_refused_by_key():
 def test_sweep_detectors_that_would_share_a_name_are_refused_by_key():
     study = tiny()
     study["lucky"]["detector_sweep"]["photons_per_frame"] = {"min": 100, "max": 100.1, "levels": 3}  # all 100ph
-    with pytest.raises(ConfigError, match=r"config key 'lucky\.detector_sweep\.photons_per_frame': .*share the name "
-                                          r"'rn0\.1_100ph'"):
+    with pytest.raises(
+        ConfigError,
+        match=r"config key 'lucky\.detector_sweep\.photons_per_frame': .*share the name "
+        r"'rn0\.1_100ph'",
+    ):
         validate_study(study)
     study = tiny()
     study["lucky"]["detector_sweep"]["read_noise_e"] = [0.1, 0.1000001]  # rn0.1 both
@@ -85,6 +93,7 @@ def test_a_detector_sweep_is_bounded():
 
 # --- names (items 8, 10) -------------------------------------------------------------------
 
+
 @pytest.mark.parametrize("name", ["good\n", "x\n", "caf\u00e9", "g\u00f6\u00f6d", "tab\t", "a" * 129, "a" * 300])
 @pytest.mark.parametrize("kind", ["case", "figure", "detector"])
 def test_a_name_is_matched_whole_short_and_ascii(kind, name):
@@ -100,8 +109,11 @@ def test_a_name_is_matched_whole_short_and_ascii(kind, name):
     else:
         study["lucky"]["detectors"][name] = {"photons_per_frame": None, "read_noise_e": 0.0}
         key = "lucky.detectors"
-    with pytest.raises(ConfigError, match=rf"config key '{key}': .*(is not a safe name|characters long, more than "
-                                          r"the 128)"):
+    with pytest.raises(
+        ConfigError,
+        match=rf"config key '{key}': .*(is not a safe name|characters long, more than "
+        r"the 128)",
+    ):
         validate_study(study)
 
 
@@ -131,16 +143,21 @@ def test_a_sweep_point_named_longer_than_a_file_name_allows_is_refused_by_key():
 
 # --- near-equal sweep values (item 11) ----------------------------------------------------------
 
+
 def test_sweep_values_that_would_share_a_name_are_refused_by_key():
     """Names keep 6 significant digits: 0.121 and 0.1210001 were one case, drawn at two x."""
     study = with_sweep({"atmosphere.r0_500nm_m": [0.121, 0.1210001, 0.3]})
-    with pytest.raises(ConfigError, match=r"config key 'sweeps\.grid\.parameters\.atmosphere\.r0_500nm_m': the values "
-                                          r"0\.121 and 0\.1210001 would share the case name 'grid_r0_500nm_m-0\.121'"):
+    with pytest.raises(
+        ConfigError,
+        match=r"config key 'sweeps\.grid\.parameters\.atmosphere\.r0_500nm_m': the values "
+        r"0\.121 and 0\.1210001 would share the case name 'grid_r0_500nm_m-0\.121'",
+    ):
         validate_study(study)
     validate_study(with_sweep({"atmosphere.r0_500nm_m": [0.121, 0.1211, 0.3]}))  # six digits apart: two cases
 
 
 # --- seeds, labels (item 10) -----------------------------------------------------------------
+
 
 def test_a_seed_outside_0_to_2_63_is_refused_by_key():
     study = tiny()
@@ -152,9 +169,16 @@ def test_a_seed_outside_0_to_2_63_is_refused_by_key():
             validate_study(study)
 
 
-@pytest.mark.parametrize("label, drawable", [
-    (r"turned asterism", True), (r"$\alpha$ - $r_0$ (50%)", True), (r"costs $5", True),
-    (r"$\undefinedmacro$ - b", False), (r"a $x^$ b", False)])
+@pytest.mark.parametrize(
+    "label, drawable",
+    [
+        (r"turned asterism", True),
+        (r"$\alpha$ - $r_0$ (50%)", True),
+        (r"costs $5", True),
+        (r"$\undefinedmacro$ - b", False),
+        (r"a $x^$ b", False),
+    ],
+)
 def test_a_label_matplotlib_cannot_draw_is_refused_by_key(label, drawable):
     """A label with an undefined macro killed the figure job after every simulation."""
     study = tiny()
@@ -162,8 +186,11 @@ def test_a_label_matplotlib_cannot_draw_is_refused_by_key(label, drawable):
     if drawable:
         validate_study(study)
     else:
-        with pytest.raises(ConfigError, match=r"config key 'figures\.paired\.pairs\[0\]\.label': matplotlib cannot "
-                                              r"draw"):
+        with pytest.raises(
+            ConfigError,
+            match=r"config key 'figures\.paired\.pairs\[0\]\.label': matplotlib cannot "
+            r"draw",
+        ):
             validate_study(study)
 
 
@@ -177,15 +204,20 @@ def test_two_pairs_of_one_label_are_refused_by_key():
 
 # --- strict YAML, bounded grids (items 9, 10) ------------------------------------------------
 
-@pytest.mark.parametrize("overlay, message", [
-    ("seed: 1\nseed: 2\n", r"key 'seed' is written twice in one mapping \(lines 1 and 2\)"),
-    ("lucky:\n  fractions: [0.1]\n  fractions: [0.5]\n", r"key 'fractions' is written twice .*lines 2 and 3"),
-    ("- seed\n- 1\n", r"its top level is a list, not a mapping"),
-    ("7\n", r"its top level is a int, not a mapping"),
-    ("x: &x [*x]\n", r"a YAML alias refers to a value that holds it"),
-    (LIST_BOMB, r"holds more than 100,000 values once its YAML aliases"),
-    (MAPPING_BOMB, r"holds more than 100,000 values once its YAML aliases"),
-], ids=["duplicate", "nested-duplicate", "list", "number", "recursive-alias", "list-bomb", "mapping-bomb"])
+
+@pytest.mark.parametrize(
+    "overlay, message",
+    [
+        ("seed: 1\nseed: 2\n", r"key 'seed' is written twice in one mapping \(lines 1 and 2\)"),
+        ("lucky:\n  fractions: [0.1]\n  fractions: [0.5]\n", r"key 'fractions' is written twice .*lines 2 and 3"),
+        ("- seed\n- 1\n", r"its top level is a list, not a mapping"),
+        ("7\n", r"its top level is a int, not a mapping"),
+        ("x: &x [*x]\n", r"a YAML alias refers to a value that holds it"),
+        (LIST_BOMB, r"holds more than 100,000 values once its YAML aliases"),
+        (MAPPING_BOMB, r"holds more than 100,000 values once its YAML aliases"),
+    ],
+    ids=["duplicate", "nested-duplicate", "list", "number", "recursive-alias", "list-bomb", "mapping-bomb"],
+)
 def test_check_refuses_a_config_file_naming_it(overlay, message, tmp_path, capsys):
     path = tmp_path / "overlay.yaml"
     path.write_text(overlay)
@@ -199,8 +231,10 @@ def test_check_refuses_a_config_file_naming_it(overlay, message, tmp_path, capsy
 def test_yaml_merge_keys_and_the_studies_still_read():
     from luckyao.studyspec.yamlfile import read_config_text
 
-    assert read_config_text("b: &b {x: 1, y: 2}\nc: {<<: *b, x: 3}\n", "t") == {"b": {"x": 1, "y": 2},
-                                                                              "c": {"x": 3, "y": 2}}
+    assert read_config_text("b: &b {x: 1, y: 2}\nc: {<<: *b, x: 3}\n", "t") == {
+        "b": {"x": 1, "y": 2},
+        "c": {"x": 3, "y": 2},
+    }
     for path in [TINY, *sorted((REPO / "config").glob("*.yaml"))]:
         assert read_config_text(path.read_text(), str(path)) == yaml.safe_load(path.read_text())
 
@@ -208,12 +242,19 @@ def test_yaml_merge_keys_and_the_studies_still_read():
 def test_a_grid_too_large_is_refused_at_once_by_key():
     """A grid of 10^6 points hung `check` for more than 10 minutes; 10^4 planned 40,202 jobs."""
     values = [0.1 + 0.001 * i for i in range(100)]
-    for parameters, points in (({"atmosphere.r0_500nm_m": values, "atmosphere.outer_scale_m": values[:20]}, "2,000"),
-                               ({"atmosphere.r0_500nm_m": values, "atmosphere.outer_scale_m": values,
-                                 "camera.wavelength_m": values}, "1,000,000")):
+    for parameters, points in (
+        ({"atmosphere.r0_500nm_m": values, "atmosphere.outer_scale_m": values[:20]}, "2,000"),
+        (
+            {"atmosphere.r0_500nm_m": values, "atmosphere.outer_scale_m": values, "camera.wavelength_m": values},
+            "1,000,000",
+        ),
+    ):
         start = time.perf_counter()
-        with pytest.raises(ConfigError, match=rf"config key 'sweeps\.grid\.parameters': a grid of {points} points "
-                                              r"\(100 x .* values.*\), more than the 1,000 a study may hold"):
+        with pytest.raises(
+            ConfigError,
+            match=rf"config key 'sweeps\.grid\.parameters': a grid of {points} points "
+            r"\(100 x .* values.*\), more than the 1,000 a study may hold",
+        ):
             validate_study(with_sweep(parameters))
         assert time.perf_counter() - start < 5
 
@@ -224,14 +265,27 @@ def test_the_workflow_refuses_an_alias_bomb_before_reading_it(bomb, tmp_path):
     """A 2 KB alias bomb hung the dry run (Snakemake's own config merge, or the checks)."""
     folder = tmp_path / "study"
     (folder / "config").mkdir(parents=True)
-    (folder / "config" / "config.yaml").write_text(TINY.read_text() + "junk:\n"
-                                                   + "".join(f"  {line}\n" for line in bomb.splitlines()))
-    command = [sys.executable, "-m", "snakemake", "-s", str(REPO / "Snakefile"), "-d", str(folder), "-n",
-               "--cores", "1"]
+    (folder / "config" / "config.yaml").write_text(
+        TINY.read_text() + "junk:\n" + "".join(f"  {line}\n" for line in bomb.splitlines())
+    )
+    command = [
+        sys.executable,
+        "-m",
+        "snakemake",
+        "-s",
+        str(REPO / "Snakefile"),
+        "-d",
+        str(folder),
+        "-n",
+        "--cores",
+        "1",
+    ]
     result = subprocess.run(command, capture_output=True, text=True, timeout=120)
     assert result.returncode != 0
-    assert "luckyao: invalid study config: config file 'config/config.yaml': holds more than 100,000 values" \
-        in result.stderr, result.stderr[-2000:]
+    assert (
+        "luckyao: invalid study config: config file 'config/config.yaml': holds more than 100,000 values"
+        in result.stderr
+    ), result.stderr[-2000:]
 
 
 @pytest.mark.workflow
@@ -243,14 +297,27 @@ def test_run_sh_refuses_an_overlay_alias_bomb_before_snakemake_merges_it(tmp_pat
     (folder / "config" / "config.yaml").write_text(TINY.read_text())
     overlay = tmp_path / "bomb.yaml"
     overlay.write_text("junk:\n" + "".join(f"  {line}\n" for line in MAPPING_BOMB.splitlines()))
-    command = [sys.executable, "-m", "luckyao.jobs.live_run", "-s", str(REPO / "Snakefile"), "-d", str(folder),
-               "-n", "--cores", "1", "--configfile", str(overlay)]
+    command = [
+        sys.executable,
+        "-m",
+        "luckyao.jobs.live_run",
+        "-s",
+        str(REPO / "Snakefile"),
+        "-d",
+        str(folder),
+        "-n",
+        "--cores",
+        "1",
+        "--configfile",
+        str(overlay),
+    ]
     result = subprocess.run(command, capture_output=True, text=True, timeout=120)
     assert result.returncode != 0
     assert f"config file '{overlay}': holds more than 100,000 values" in result.stderr, result.stderr[-2000:]
 
 
 # --- one pre-flight, sizes (item 9) ---------------------------------------------------------------
+
 
 def huge(tmp_path) -> Path:
     """duration_s 1e7: about 3 TB of memory for each simulation, the issue's 12,870 GB case."""
@@ -274,12 +341,25 @@ def test_the_dry_run_refuses_what_check_refuses(tmp_path):
     folder = tmp_path / "study"
     (folder / "config").mkdir(parents=True)
     (folder / "config" / "config.yaml").write_text(TINY.read_text())
-    command = [sys.executable, "-m", "snakemake", "-s", str(REPO / "Snakefile"), "-d", str(folder), "-n",
-               "--cores", "1", "--configfile", str(huge(tmp_path))]
+    command = [
+        sys.executable,
+        "-m",
+        "snakemake",
+        "-s",
+        str(REPO / "Snakefile"),
+        "-d",
+        str(folder),
+        "-n",
+        "--cores",
+        "1",
+        "--configfile",
+        str(huge(tmp_path)),
+    ]
     result = subprocess.run(command, capture_output=True, text=True, timeout=300)
     assert result.returncode != 0
-    assert "luckyao: study too large: config key 'cases.ltao': job simulate ltao needs" in result.stderr, \
-        result.stderr[-2000:]
+    assert "luckyao: study too large: config key 'cases.ltao': job simulate ltao needs" in result.stderr, result.stderr[
+        -2000:
+    ]
 
 
 def free_disk(monkeypatch, free_bytes: float) -> None:
@@ -295,8 +375,9 @@ def test_the_files_of_a_study_are_summed_against_the_free_disk(tmp_path, monkeyp
     free_disk(monkeypatch, max(sizes) * 1.01)
     assert sum(sizes) > max(sizes) * 1.01
     problems = preflight(study, cases, tmp_path, memory_bytes=1e15)
-    assert len(problems) == 1 and problems[0].startswith("config key 'keep_frames': the study's files not yet made "
-                                                         "need about"), problems
+    assert len(problems) == 1 and problems[0].startswith(
+        "config key 'keep_frames': the study's files not yet made need about"
+    ), problems
     assert "every frame cube kept" in problems[0]
     free_disk(monkeypatch, sum(sizes) * 1.01)
     assert preflight(study, cases, tmp_path, memory_bytes=1e15) == []
@@ -327,19 +408,27 @@ def test_a_file_already_made_needs_no_disk(tmp_path, monkeypatch):
 
 # --- draw and export say what they expected (item 10) ---------------------------------------------
 
+
 def titled(path: Path, title: str, **variables) -> Path:
-    xr.Dataset({name: ("x", np.asarray(values, dtype=float)) for name, values in variables.items()},
-               attrs={"title": title, "config_json": json.dumps({"duration_s": 1.0})}).to_netcdf(path)
+    xr.Dataset(
+        {name: ("x", np.asarray(values, dtype=float)) for name, values in variables.items()},
+        attrs={"title": title, "config_json": json.dumps({"duration_s": 1.0})},
+    ).to_netcdf(path)
     return path
 
 
 def test_draw_says_it_expected_a_figures_data():
     import luckyao
 
-    case = xr.Dataset({"strehl": ("x", [0.1])}, attrs={"title": "luckyao lucky imaging of case good",
-                                                        "config_json": json.dumps({"duration_s": 1.0})})
-    with pytest.raises(ValueError, match=r"luckyao\.draw: expected a figure's data \(figures/<id>\.nc\), got a "
-                                         r"case's lucky-imaging results"):
+    case = xr.Dataset(
+        {"strehl": ("x", [0.1])},
+        attrs={"title": "luckyao lucky imaging of case good", "config_json": json.dumps({"duration_s": 1.0})},
+    )
+    with pytest.raises(
+        ValueError,
+        match=r"luckyao\.draw: expected a figure's data \(figures/<id>\.nc\), got a "
+        r"case's lucky-imaging results",
+    ):
         luckyao.draw(case)
 
 
@@ -347,6 +436,8 @@ def test_export_says_it_expected_a_cases_lucky_results(tmp_path, capsys):
     path = titled(tmp_path / "telemetry.nc", "luckyao telemetry of case good", frame_strehl=[0.1, 0.2])
     code = main(["export", str(path), "--out", str(tmp_path / "x.fits")])
     output = capsys.readouterr().err
-    assert code == 1 and "expected a case's lucky-imaging results (results/cases/<case>/lucky.nc), got a case's " \
-                         "telemetry" in output, output
+    assert (
+        code == 1
+        and "expected a case's lucky-imaging results (results/cases/<case>/lucky.nc), got a case's telemetry" in output
+    ), output
     assert "n_pixels" not in output and not (tmp_path / "x.fits").exists()

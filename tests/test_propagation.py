@@ -91,8 +91,11 @@ def test_layers_add_with_their_weights():
     both = Propagator([l1, l2], ScreenSet.from_screens(s1.specs + s2.specs, [screen1, screen2]), los, GRID)
     one = Propagator([l1], s1, los, GRID)
     two = Propagator([l2], s2, los, GRID)
-    np.testing.assert_allclose(both.sample([9], [[0.5, 2.0]])[0],
-                               0.5 * one.sample([9], [[1.0]])[0] + 2.0 * two.sample([9], [[1.0]])[0], atol=1e-4)
+    np.testing.assert_allclose(
+        both.sample([9], [[0.5, 2.0]])[0],
+        0.5 * one.sample([9], [[1.0]])[0] + 2.0 * two.sample([9], [[1.0]])[0],
+        atol=1e-4,
+    )
 
 
 def test_steps_sampled_together_equal_steps_sampled_one_by_one():
@@ -102,8 +105,9 @@ def test_steps_sampled_together_equal_steps_sampled_one_by_one():
     l2, s2, screen2 = _single_layer(8000.0, 30.0, 250.0, seed=2)
     screens = ScreenSet.from_screens(s1.specs + s2.specs, [screen1, screen2])
     assert {spec.major_axis for spec in screens.specs} == {0, 1}
-    prop = Propagator([l1, l2], screens, [LineOfSight(1e-5, 0.0), LineOfSight(0.0, 2e-5, 22000.0)], GRID,
-                      mask=_annulus(GRID))
+    prop = Propagator(
+        [l1, l2], screens, [LineOfSight(1e-5, 0.0), LineOfSight(0.0, 2e-5, 22000.0)], GRID, mask=_annulus(GRID)
+    )
     steps, scales = [3, 4, 11], [[1.0, 2.0], [0.5, 1.5], [3.0, 0.2]]
     together = prop.sample_valid(steps, scales)
     for step, scale, phase in zip(steps, scales, together):
@@ -127,8 +131,6 @@ def test_uplink_line_of_sight_follows_the_beam_from_an_offset_launch():
     launch, direction, beacon_height = np.array([0.4, -0.3]), (5e-5, -1e-4), 22000.0
     x, y = GRID.xy_m
     for height in (0.0, 4500.0, 18000.0):
-        expected = cone_coordinates(x + launch[0], y + launch[1], height, beacon_height, direction,
-                                    origin_xy_m=launch)
-        got = footprint_m(x + launch[0], y + launch[1], height,
-                          uplink_line_of_sight(direction, launch, beacon_height))
+        expected = cone_coordinates(x + launch[0], y + launch[1], height, beacon_height, direction, origin_xy_m=launch)
+        got = footprint_m(x + launch[0], y + launch[1], height, uplink_line_of_sight(direction, launch, beacon_height))
         np.testing.assert_allclose(got, expected, atol=1e-12)

@@ -6,18 +6,28 @@ import numpy as np
 import pytest
 import scipy.fft
 import xarray as xr
+from reference import detect
 
-from luckyao.lucky.detector import Detector, KeyedNoise
 from luckyao.atmosphere.statistics import von_karman_psd
+from luckyao.lucky.detector import Detector, KeyedNoise
 from luckyao.lucky.metrics import EncircledEnergy, centroid_px
 from luckyao.lucky.pipeline import ImageReference, run_lucky, run_lucky_methods
 from luckyao.lucky.ranking import ExternalCriterion, fraction_counts
+from luckyao.lucky.registration import (
+    REGISTRATIONS,
+    WINDOW_RADIUS_FWHM,
+    FrameSpectra,
+    Registration,
+    aligned,
+    empty_aligned,
+    fourier_shift,
+    gaussian_kernel,
+    search_px,
+    shifts_of,
+)
 from luckyao.lucky.scoring import MatchedStrehl
-from luckyao.lucky.registration import (REGISTRATIONS, WINDOW_RADIUS_FWHM, FrameSpectra, Registration, aligned,
-                                        empty_aligned, fourier_shift, gaussian_kernel, search_px, shifts_of)
 from luckyao.optics.imaging import Camera, Imager
 from luckyao.optics.pupil import Telescope
-from reference import detect
 
 N = 64
 SCALE_ARCSEC = 5 / 256  # the study's camera: 800 nm, 4.2 m (1.2 m obscuration), lambda/D = 2.0 px
@@ -94,8 +104,9 @@ def test_each_method_recovers_a_subpixel_shift_of_a_noiseless_obscured_airy(name
         box = search_px(n, SCALE_ARCSEC)
         image_, core = airy(n)
         assert box == 128
-        np.testing.assert_allclose(Registration(name, image_, core, box).positions_px(frames, centroid_px(frames)),
-                                   n // 2 + shifts, atol=0.05)
+        np.testing.assert_allclose(
+            Registration(name, image_, core, box).positions_px(frames, centroid_px(frames)), n // 2 + shifts, atol=0.05
+        )
 
 
 def detected(unit: np.ndarray, photons: float, read_noise_e: float, k: int, seed: int = 7) -> np.ndarray:
@@ -120,7 +131,8 @@ def test_centre_of_gravity_noise_variance_against_theory(photons, read_noise_e):
     centres = centroid_px(detected(unit, photons, read_noise_e, m))
     for axis in (0, 1):
         assert np.var(centres[:, axis] - N // 2, ddof=0) == pytest.approx(
-            expected, abs=5 * expected * np.sqrt(2 / (m - 1)))
+            expected, abs=5 * expected * np.sqrt(2 / (m - 1))
+        )
 
 
 def linear_weights(reg: Registration, at: tuple[int, int]) -> np.ndarray:
@@ -156,9 +168,15 @@ def expected_error_px(name: str, image: np.ndarray, photons: float, read_noise_e
     return float(np.sqrt(((below - above) ** 2 * variance).sum()) / (2 * abs(curvature)))
 
 
-@pytest.mark.parametrize("name, photons, read_noise_e, above_first_order", [
-    ("peak", 300.0, 0.1, 1.0), ("xcorr", 300.0, 0.1, 1.0), ("xcorr", 1000.0, 1.0, 1.0),
-    ("windowed_cog", 300.0, 0.1, 1.5)])
+@pytest.mark.parametrize(
+    "name, photons, read_noise_e, above_first_order",
+    [
+        ("peak", 300.0, 0.1, 1.0),
+        ("xcorr", 300.0, 0.1, 1.0),
+        ("xcorr", 1000.0, 1.0, 1.0),
+        ("windowed_cog", 300.0, 0.1, 1.5),
+    ],
+)
 def test_noisy_positions_have_their_expected_error(name, photons, read_noise_e, above_first_order):
     """A noisy obscured Airy pattern on the axis (signal-to-noise high enough for the first order to
     hold: at 100 photons and 1 e- the ratio of noisy sums adds ~10 %): each method's rms error per axis equals its
@@ -176,7 +194,10 @@ def test_noisy_positions_have_their_expected_error(name, photons, read_noise_e, 
     rms_error = squared.std(axis=0) / (2 * rms * np.sqrt(m))  # standard error of the sample rms (delta method)
     expected = expected_error_px(name, image, photons, read_noise_e)
     assert np.all(rms > expected - 5 * rms_error) and np.all(rms < above_first_order * expected + 5 * rms_error), (
-        rms, rms_error, expected)
+        rms,
+        rms_error,
+        expected,
+    )
     assert np.all(rms > 0.95 * cramer_rao_px(image, photons, read_noise_e))
 
 
@@ -225,9 +246,20 @@ def test_run_lucky_with_a_subpixel_method_matches_brute_force(name):
     external = ExternalCriterion("lgs_rms", np.random.default_rng(2).permutation(n_frames) * 1.0, False, "nm")
     detectors = [Detector("ideal"), Detector("emccd", 400.0, 0.1)]
     fractions = [0.1, 0.5, 1.0]
-    chunks = lambda: ((s, frames[s:s + 7]) for s in range(0, n_frames, 7))  # noqa: E731
-    ds = run_lucky(chunks, n_frames, detectors, fractions, 1 / (2 * np.pi), 0.02, seed,
-                   criteria_external=[external], image_crop_px=None, progress_interval_s=0, registration=reg)
+    chunks = lambda: ((s, frames[s : s + 7]) for s in range(0, n_frames, 7))  # noqa: E731
+    ds = run_lucky(
+        chunks,
+        n_frames,
+        detectors,
+        fractions,
+        1 / (2 * np.pi),
+        0.02,
+        seed,
+        criteria_external=[external],
+        image_crop_px=None,
+        progress_interval_s=0,
+        registration=reg,
+    )
 
     def shifted_sum(of, order, count, positions):
         total = np.zeros((n, n))
@@ -242,20 +274,24 @@ def test_run_lucky_with_a_subpixel_method_matches_brute_force(name):
         positions = reg.positions_px(noisy, centroid_px(noisy))
         np.testing.assert_allclose(ds.frame_registered_px[i], positions, atol=1e-9)
         assert int(ds.unregistered_frames[i]) == 0
-        for criterion, values, larger in [("strehl", ds.frame_strehl[i].values, True),
-                                          ("lgs_rms", external.values, False)]:
+        for criterion, values, larger in [
+            ("strehl", ds.frame_strehl[i].values, True),
+            ("lgs_rms", external.values, False),
+        ]:
             order = sorted(range(n_frames), key=lambda f: ((-1 if larger else 1) * values[f], f))
             for fraction, count in zip(fractions, fraction_counts(n_frames, fractions)):
                 expected = shifted_sum(noisy, order, count, positions)
                 got = ds.image.sel(criterion=criterion, fraction=fraction, detector=det.name).values
                 np.testing.assert_allclose(got, expected / expected.sum(), atol=2e-6)
                 clean = shifted_sum(frames, order, count, positions)
-                assert ds.strehl_noiseless.sel(criterion=criterion, fraction=fraction, detector=det.name) == \
-                    pytest.approx(float(clean.max() / clean.sum() * 2 * np.pi), rel=1e-4)
+                assert ds.strehl_noiseless.sel(
+                    criterion=criterion, fraction=fraction, detector=det.name
+                ) == pytest.approx(float(clean.max() / clean.sum() * 2 * np.pi), rel=1e-4)
                 for name, image in (("d50_arcsec", expected), ("d50_arcsec_noiseless", clean)):  # about the axis
                     d50 = 2 * 0.02 * EncircledEnergy(n).radius_px(image, centres_px=np.array([n / 2, n / 2]))
-                    assert ds[name].sel(criterion=criterion, fraction=fraction, detector=det.name) == \
-                        pytest.approx(float(d50), rel=1e-5), name
+                    assert ds[name].sel(criterion=criterion, fraction=fraction, detector=det.name) == pytest.approx(
+                        float(d50), rel=1e-5
+                    ), name
 
 
 def turbulent_frames(n_frames: int, n_pixels: int, seed: int) -> np.ndarray:
@@ -276,7 +312,7 @@ def turbulent_frames(n_frames: int, n_pixels: int, seed: int) -> np.ndarray:
         filtered = amplitude * (np.where(f < 9 / (2 * 4.2), 0.08, 1.0) if i % 2 == 0 else 1.0)
         screen = np.fft.fft2((rng.standard_normal((m, m)) + 1j * rng.standard_normal((m, m))) * filtered).real
         tilt_rad = rng.normal(0.0, 0.25, 2) * np.pi / 180 / 3600
-        phase = screen[:grid.n_pix, :grid.n_pix][mask] + 2 * np.pi * (tilt_rad[0] * y + tilt_rad[1] * x) / 800e-9
+        phase = screen[: grid.n_pix, : grid.n_pix][mask] + 2 * np.pi * (tilt_rad[0] * y + tilt_rad[1] * x) / 800e-9
         phases[i] = phase - phase.mean()
     return imager.image(phases), imager.diffraction_limited_peak
 
@@ -285,11 +321,11 @@ def test_the_declared_memory_of_a_subpixel_method_is_its_vector():
     """``resources.SUBPIXEL_SUMS_FRACTION`` (written out, so that parsing the workflow loads no
     FFT code) is a sub-pixel method's vector (``lucky.cropped``) over a whole frame, for the
     4.2 m camera (256 pixels over 5"): the lucky jobs' declared memory follows the layout."""
-    from luckyao.lucky.cropped import CroppedFrames, crop_px
     from luckyao.jobs.resources import SUBPIXEL_SUMS_FRACTION
+    from luckyao.lucky.cropped import CroppedFrames, crop_px
 
     n, scale = 256, 5.0 / 256
-    vector, = CroppedFrames(n, crop_px(n, scale), EncircledEnergy(n), 1.0, scale).item_shape
+    (vector,) = CroppedFrames(n, crop_px(n, scale), EncircledEnergy(n), 1.0, scale).item_shape
     assert SUBPIXEL_SUMS_FRACTION == vector / n**2
 
 
@@ -331,10 +367,23 @@ def test_the_subpixel_methods_crop_scores_the_whole_frames_integrated_images():
     reg = registration("xcorr", n)
     external = ExternalCriterion("lgs_rms", np.random.default_rng(4).permutation(n_frames) * 1.0, False, "nm")
     detectors = [Detector("ideal"), Detector("emccd", 3e3, 0.1)]
-    chunks = lambda: ((s, frames[s:s + 16]) for s in range(0, n_frames, 16))  # noqa: E731
-    runs = [run_lucky(chunks, n_frames, detectors, [0.05, 0.25, 1.0], peak, SCALE_ARCSEC, 3,
-                      criteria_external=[external], progress_interval_s=0, registration=reg, crop_px=crop)
-            for crop in (n, None)]
+    chunks = lambda: ((s, frames[s : s + 16]) for s in range(0, n_frames, 16))  # noqa: E731
+    runs = [
+        run_lucky(
+            chunks,
+            n_frames,
+            detectors,
+            [0.05, 0.25, 1.0],
+            peak,
+            SCALE_ARCSEC,
+            3,
+            criteria_external=[external],
+            progress_interval_s=0,
+            registration=reg,
+            crop_px=crop,
+        )
+        for crop in (n, None)
+    ]
     whole, cropped = runs
     assert cropped.image.sizes["y"] == 64 and whole.image.sizes["y"] == 64  # 1.25" at 5/256 " per pixel
     for name, rel in (("strehl", 1e-3), ("fwhm_arcsec", 5e-3), ("d50_arcsec", 1e-5)):
@@ -351,11 +400,12 @@ def test_a_target_registered_on_a_reference_takes_its_positions():
     frames = gaussian_spots(n, n_frames, 8)
     reg = spot_registration("xcorr", n)
     detectors = [Detector("ideal"), Detector("emccd", 300.0, 0.1)]
-    chunks = lambda: ((s, frames[s:s + 8]) for s in range(0, n_frames, 8))  # noqa: E731
+    chunks = lambda: ((s, frames[s : s + 8]) for s in range(0, n_frames, 8))  # noqa: E731
     kwargs = dict(image_crop_px=None, progress_interval_s=0, registration=reg)
     star = run_lucky(chunks, n_frames, detectors, [0.2, 1.0], 1 / (2 * np.pi), 0.02, 3, **kwargs)
-    target = run_lucky(chunks, n_frames, detectors, [0.2, 1.0], 1 / (2 * np.pi), 0.02, 3,
-                       reference=ImageReference.of(star), **kwargs)
+    target = run_lucky(
+        chunks, n_frames, detectors, [0.2, 1.0], 1 / (2 * np.pi), 0.02, 3, reference=ImageReference.of(star), **kwargs
+    )
     np.testing.assert_array_equal(target.frame_registered_px, star.frame_registered_px)
     np.testing.assert_allclose(target.image, star.image, rtol=1e-6, atol=1e-9)
 
@@ -392,12 +442,16 @@ def test_knees_interpolate_the_crossing_in_log_signal_and_magnitudes_follow_the_
 
     signal = np.array([10.0, 100.0, 1000.0, 10000.0])
     dims = ("case", "signal")
-    ds = xr.Dataset({"strehl_noiseless": (dims, [[0.02, 0.05, 0.085, 0.095], [0.0, 0.01, 0.02, 0.05]]),
-                     "strehl": (dims, np.full((2, 4), 0.5)),  # the noisy image's own (biased): not used
-                     "strehl_noiseless_detector": (("case",), [0.1, 0.1]),
-                     "d50_arcsec_noiseless": (dims, [[3.0, 1.5, 1.05, 1.0], [3.0, 1.5, 1.05, 1.0]]),
-                     "d50_arcsec_noiseless_detector": (("case",), [1.0, 1.0])},
-                    coords={"signal": signal, "case": ["a", "b"]})
+    ds = xr.Dataset(
+        {
+            "strehl_noiseless": (dims, [[0.02, 0.05, 0.085, 0.095], [0.0, 0.01, 0.02, 0.05]]),
+            "strehl": (dims, np.full((2, 4), 0.5)),  # the noisy image's own (biased): not used
+            "strehl_noiseless_detector": (("case",), [0.1, 0.1]),
+            "d50_arcsec_noiseless": (dims, [[3.0, 1.5, 1.05, 1.0], [3.0, 1.5, 1.05, 1.0]]),
+            "d50_arcsec_noiseless_detector": (("case",), [1.0, 1.0]),
+        },
+        coords={"signal": signal, "case": ["a", "b"]},
+    )
     strehl = knees(ds, "strehl").values
     assert strehl[0] == pytest.approx(10**3.5) and np.isnan(strehl[1])
     assert knees(ds, "d50_arcsec").values[0] == pytest.approx(10 ** (2 + 0.4 / 0.45))
@@ -418,18 +472,24 @@ def test_methods_sharing_the_passes_give_each_method_its_own_run_bit_for_bit():
     frames[17] = 0.0
     regs = [spot_registration(name, n) for name in REGISTRATIONS]
     external = ExternalCriterion("lgs_rms", np.random.default_rng(3).permutation(n_frames) * 1.0, False, "nm")
-    detectors = [Detector("ideal"), Detector("faint", 150.0, 0.1), Detector("bright", 3e3, 1.0),
-                 Detector("em", 400.0, 0.1, electron_multiplying=True)]
-    chunks = lambda: ((s, frames[s:s + 9]) for s in range(0, n_frames, 9))  # noqa: E731
+    detectors = [
+        Detector("ideal"),
+        Detector("faint", 150.0, 0.1),
+        Detector("bright", 3e3, 1.0),
+        Detector("em", 400.0, 0.1, electron_multiplying=True),
+    ]
+    chunks = lambda: ((s, frames[s : s + 9]) for s in range(0, n_frames, 9))  # noqa: E731
     args = (chunks, n_frames, detectors, [0.1, 0.3, 1.0], 1 / (2 * np.pi), 0.02, seed)
     kwargs = dict(criteria_external=[external], image_crop_px=16, n_blocks=3, progress_interval_s=0)
     together = run_lucky_methods(*args, registrations=regs, **kwargs)
-    on_reference = run_lucky_methods(*args, registrations=regs, references=[ImageReference.of(ds) for ds in together],
-                                     **kwargs)
+    on_reference = run_lucky_methods(
+        *args, registrations=regs, references=[ImageReference.of(ds) for ds in together], **kwargs
+    )
     assert sum(int(ds.attrs["frames_drawn_again"].sum()) for ds in together) > 0  # pass 2 moves frames
     for reg, ds, target in zip(regs, together, on_reference):
         alone = run_lucky(*args, registration=reg, **kwargs)
         xr.testing.assert_identical(ds, alone)
         np.testing.assert_array_equal(ds.attrs["frames_drawn_again"], alone.attrs["frames_drawn_again"])
-        xr.testing.assert_identical(target, run_lucky(*args, registration=reg, reference=ImageReference.of(alone),
-                                                      **kwargs))
+        xr.testing.assert_identical(
+            target, run_lucky(*args, registration=reg, reference=ImageReference.of(alone), **kwargs)
+        )

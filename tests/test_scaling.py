@@ -9,9 +9,9 @@ import yaml
 
 from luckyao.optics.imaging import Imager
 from luckyao.studyspec.case import Case
+from luckyao.studyspec.products import turbulence_spec
 from luckyao.studyspec.schema import ConfigError
 from luckyao.studyspec.study import load_study, validate_study
-from luckyao.studyspec.products import turbulence_spec
 from luckyao.units import ARCSEC_RAD
 
 CONFIG = Path(__file__).resolve().parents[1] / "config" / "config.yaml"
@@ -45,8 +45,9 @@ def test_default_system_is_derived_as_written_before(study):
     assert turbulence_spec(study[0], case)["min_across_m"] == 16.8
 
 
-@pytest.mark.parametrize("diameter_m, n_sub, obscuration_m", [(2.5, 5, 0.714), (4.2, 8, 1.2), (8.2, 16, 2.343),
-                                                              (10.4, 20, 2.971)])
+@pytest.mark.parametrize(
+    "diameter_m, n_sub, obscuration_m", [(2.5, 5, 0.714), (4.2, 8, 1.2), (8.2, 16, 2.343), (10.4, 20, 2.971)]
+)
 def test_size_dependent_keys_follow_the_diameter(study, diameter_m, n_sub, obscuration_m):
     """At a constant pitch: round(D / 0.525 m) sub-apertures (pitch within 5 % of 0.525 m),
     a DM in Fried geometry, the obscuration 2/7 D, and a camera that samples lambda/D at
@@ -70,29 +71,43 @@ def test_size_dependent_keys_follow_the_diameter(study, diameter_m, n_sub, obscu
 
 
 def test_explicit_values_win(study):
-    case = resolve(study, {"telescope": {"diameter_m": 8.2, "obscuration_m": 1.0}, "wfs": {"n_subapertures": 8},
-                           "camera": {"n_pixels": 128}})
+    case = resolve(
+        study,
+        {
+            "telescope": {"diameter_m": 8.2, "obscuration_m": 1.0},
+            "wfs": {"n_subapertures": 8},
+            "camera": {"n_pixels": 128},
+        },
+    )
     assert case["telescope"]["obscuration_m"] == 1.0 and case["wfs"]["n_subapertures"] == 8
     assert case["ao"]["n_actuators"] == 17 and case["camera"]["n_pixels"] == 128
 
 
 def test_derivation_parameters_change_the_derived_values(study):
-    case = resolve(study, {"telescope": {"diameter_m": 4.2, "subaperture_pitch_m": 0.2625, "obscuration_ratio": 0.1},
-                           "camera": {"pixels_per_lambda_over_d": 3.0}})
+    case = resolve(
+        study,
+        {
+            "telescope": {"diameter_m": 4.2, "subaperture_pitch_m": 0.2625, "obscuration_ratio": 0.1},
+            "camera": {"pixels_per_lambda_over_d": 3.0},
+        },
+    )
     assert case["wfs"]["n_subapertures"] == 16 and case["ao"]["n_actuators"] == 17
     assert case["telescope"]["obscuration_m"] == 0.42
     assert case["camera"]["n_pixels"] == 384  # 3 x 127.3 = 381.8 -> 384
 
 
-@pytest.mark.parametrize("override, key", [
-    ({"telescope": {"subaperture_pitch_m": 0.5}, "wfs": {"n_subapertures": 8}}, "cases.x.wfs.n_subapertures"),
-    ({"telescope": {"subaperture_pitch_m": 0.5}, "ao": {"n_actuators": 9}}, "cases.x.ao.n_actuators"),
-    ({"telescope": {"obscuration_m": 1.0, "obscuration_ratio": 0.2}}, "cases.x.telescope.obscuration_m"),
-    ({"camera": {"n_pixels": 256, "pixels_per_lambda_over_d": 2.0}}, "cases.x.camera.n_pixels"),
-    ({"telescope": {"diameter_m": 0.7}}, "cases.x.telescope.diameter_m"),
-    ({"telescope": {"obscuration_ratio": 1.5}}, "cases.x.telescope.obscuration_ratio"),
-    ({"telescope": {"subaperture_pitch_m": -0.5}}, "cases.x.telescope.subaperture_pitch_m"),
-])
+@pytest.mark.parametrize(
+    "override, key",
+    [
+        ({"telescope": {"subaperture_pitch_m": 0.5}, "wfs": {"n_subapertures": 8}}, "cases.x.wfs.n_subapertures"),
+        ({"telescope": {"subaperture_pitch_m": 0.5}, "ao": {"n_actuators": 9}}, "cases.x.ao.n_actuators"),
+        ({"telescope": {"obscuration_m": 1.0, "obscuration_ratio": 0.2}}, "cases.x.telescope.obscuration_m"),
+        ({"camera": {"n_pixels": 256, "pixels_per_lambda_over_d": 2.0}}, "cases.x.camera.n_pixels"),
+        ({"telescope": {"diameter_m": 0.7}}, "cases.x.telescope.diameter_m"),
+        ({"telescope": {"obscuration_ratio": 1.5}}, "cases.x.telescope.obscuration_ratio"),
+        ({"telescope": {"subaperture_pitch_m": -0.5}}, "cases.x.telescope.subaperture_pitch_m"),
+    ],
+)
 def test_inconsistent_sizes_are_refused_by_key(study, override, key):
     with pytest.raises(ConfigError, match=f"config key '{key}'"):
         resolve(study, override)

@@ -20,7 +20,9 @@ def test_no_two_numpy_streams_coincide():
     layer index the screens could use, and the layers differ from one another."""
     for seed in (0, 1, 2014):
         draws = [_first_draws(screen_rng(seed, layer)) for layer in range(64)] + [
-            _first_draws(wfs_noise_rng(seed)), _first_draws(calibration_rng(seed))]
+            _first_draws(wfs_noise_rng(seed)),
+            _first_draws(calibration_rng(seed)),
+        ]
         assert len(set(draws)) == len(draws)
         assert _first_draws(wfs_noise_rng(seed)) != _first_draws(np.random.default_rng([seed, 1]))
     with pytest.raises(ValueError):
@@ -45,7 +47,10 @@ def test_no_two_detector_streams_coincide_in_the_default_study():
     name = next(f["cases"][0] for f in study["figures"].values() if f["kind"] == "quality_vs_signal")
     detectors = lucky_settings(study, cases, name)["detectors"]
     assert len(detectors) > 1
-    keys = {noise_streams.stream_key(target_seed(study["seed"], t), detector_key(d), f)
-            for t in range(3) for d in detectors for f in range(50)}
+    keys = {
+        noise_streams.stream_key(target_seed(study["seed"], t), detector_key(d), f)
+        for t in range(3)
+        for d in detectors
+        for f in range(50)
+    }
     assert len(keys) == 3 * len(detectors) * 50
-

@@ -11,8 +11,12 @@ import pytest
 import luckyao
 from luckyao.simd import LANES, transpose
 
-INLINED = {"optics/propagation.py": ("optics/taps.py", "simd.py"), "wfs/kernels.py": ("simd.py",),
-           "lucky/noise_streams.py": ("lucky/stream_vectors.py", "simd.py"), "lucky/radial_sums.py": ("simd.py",)}
+INLINED = {
+    "optics/propagation.py": ("optics/taps.py", "simd.py"),
+    "wfs/kernels.py": ("simd.py",),
+    "lucky/noise_streams.py": ("lucky/stream_vectors.py", "simd.py"),
+    "lucky/radial_sums.py": ("simd.py",),
+}
 """Files of cached kernels -> the files of the intrinsics those kernels inline."""
 
 
@@ -21,8 +25,9 @@ def _blocks_transposed(values, starts, n, row, out):
     """out[x, r] = values[starts[r] + x] for x < n, r < starts.size, by LANES x LANES blocks."""
     for first in range(0, starts.size, LANES):
         for x in range(0, n, LANES):
-            transpose(values, x, starts, first, min(LANES, starts.size - first), min(LANES, n - x), out,
-                      x * row + first, row)
+            transpose(
+                values, x, starts, first, min(LANES, starts.size - first), min(LANES, n - x), out, x * row + first, row
+            )
 
 
 @pytest.mark.parametrize("n, rows", [(16, 48), (12, 40), (20, 24), (1, 1), (33, 17)])

@@ -23,12 +23,15 @@ SLURM_TOOLS = ("slurmctld", "slurmd", "sbatch", "squeue", "munged")
 def skip_reason() -> str | None:
     """Why the SLURM test cannot or should not run here, or None."""
     if os.environ.get("LUCKYAO_SLURM_TEST") != "1":
-        return ("SLURM end-to-end test (about 5 minutes, root, starts SLURM daemons) not requested: "
-                "set LUCKYAO_SLURM_TEST=1 to run tools/slurm-local.sh")
+        return (
+            "SLURM end-to-end test (about 5 minutes, root, starts SLURM daemons) not requested: "
+            "set LUCKYAO_SLURM_TEST=1 to run tools/slurm-local.sh"
+        )
     if not hasattr(os, "geteuid") or os.geteuid() != 0:
         return "tools/slurm-local.sh must run as root (it installs packages and starts munged, slurmctld, slurmd)"
-    missing = [tool for tool in SLURM_TOOLS if shutil.which(tool, path=os.environ.get("PATH", "") + ":/usr/sbin:/sbin")
-               is None]
+    missing = [
+        tool for tool in SLURM_TOOLS if shutil.which(tool, path=os.environ.get("PATH", "") + ":/usr/sbin:/sbin") is None
+    ]
     if missing and shutil.which("apt-get") is None:
         return f"SLURM is not installed ({', '.join(missing)} missing) and there is no apt-get to install slurm-wlm"
     if Path("/etc/slurm/slurm.conf").exists():
@@ -38,8 +41,13 @@ def skip_reason() -> str | None:
 
 @pytest.mark.skipif(skip_reason() is not None, reason=skip_reason() or "")
 def test_tiny_study_through_a_real_slurm_equals_a_local_run():
-    script = subprocess.Popen(["bash", str(SCRIPT)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                              env={**os.environ, "PYTHON": sys.executable})
+    script = subprocess.Popen(
+        ["bash", str(SCRIPT)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env={**os.environ, "PYTHON": sys.executable},
+    )
     try:
         stdout, stderr = script.communicate(timeout=1800)
     except subprocess.TimeoutExpired:

@@ -21,19 +21,29 @@ def tiny() -> dict:
 def with_sweep(parameters: dict, overrides=None) -> dict:
     study = tiny()
     study["sweeps"]["grid"] = {"parameters": parameters, **({"overrides": overrides} if overrides else {})}
-    study["figures"]["grid"] = {"kind": "quality_vs_parameter", "sweep": "grid", "criteria": ["strehl"],
-                                "fractions": [1.0]}
+    study["figures"]["grid"] = {
+        "kind": "quality_vs_parameter",
+        "sweep": "grid",
+        "criteria": ["strehl"],
+        "fractions": [1.0],
+    }
     return study
 
 
 def test_a_grid_is_every_combination_named_by_its_values_with_its_values_applied():
-    study = with_sweep({"atmosphere.r0_500nm_m": [0.1, 0.3], "camera.wavelength_m": [8e-7, 1.6e-6]},
-                       overrides={"wfs": {"n_subapertures": 4}})
+    study = with_sweep(
+        {"atmosphere.r0_500nm_m": [0.1, 0.3], "camera.wavelength_m": [8e-7, 1.6e-6]},
+        overrides={"wfs": {"n_subapertures": 4}},
+    )
     cases = validate_study(study)
     points = sweep_points(study, "grid")
     names = [p.case for p in points]
-    assert names == ["grid_r0_500nm_m-0.1_wavelength_m-8e-07", "grid_r0_500nm_m-0.1_wavelength_m-1.6e-06",
-                     "grid_r0_500nm_m-0.3_wavelength_m-8e-07", "grid_r0_500nm_m-0.3_wavelength_m-1.6e-06"]
+    assert names == [
+        "grid_r0_500nm_m-0.1_wavelength_m-8e-07",
+        "grid_r0_500nm_m-0.1_wavelength_m-1.6e-06",
+        "grid_r0_500nm_m-0.3_wavelength_m-8e-07",
+        "grid_r0_500nm_m-0.3_wavelength_m-1.6e-06",
+    ]
     for point in points:
         case = cases[point.case]
         assert case["atmosphere"]["r0_500nm_m"] == point.values["atmosphere.r0_500nm_m"]
@@ -67,8 +77,10 @@ def test_expanding_twice_changes_nothing():
 def test_a_key_the_overrides_add_can_be_swept():
     """``ao.apodisation`` is absent from base (no apodisation): the sweep's overrides add it,
     so its keys are swept; without the overrides the path is refused by key."""
-    apodised = {"lgs": {"enabled": True},
-                "ao": {"mode": "ltao", "apodisation": {"driver": "lgs", "blocked_fraction": 0.0}}}
+    apodised = {
+        "lgs": {"enabled": True},
+        "ao": {"mode": "ltao", "apodisation": {"driver": "lgs", "blocked_fraction": 0.0}},
+    }
     parameters = {"ao.apodisation.blocked_fraction": [0.0, 0.2], "ao.apodisation.driver": ["lgs", "oracle"]}
     cases = validate_study(with_sweep(parameters, overrides=apodised))
     points = sweep_points(with_sweep(parameters, overrides=apodised), "grid")
@@ -83,11 +95,14 @@ def test_two_parameters_with_one_last_part_are_named_by_their_paths():
     assert [p.case for p in sweep_points(study, "grid")] == ["grid_camera.wavelength_m-8e-07_lgs.wavelength_m-5.89e-07"]
 
 
-@pytest.mark.parametrize("parameters, key", [
-    ({"atmosphere.r0_cm": [10]}, "sweeps.grid.parameters.atmosphere.r0_cm"),
-    ({"atmosphere": [1]}, "sweeps.grid.parameters.atmosphere"),
-    ({"atmosphere.r0_500nm_m": []}, "sweeps.grid.parameters.atmosphere.r0_500nm_m"),
-])
+@pytest.mark.parametrize(
+    "parameters, key",
+    [
+        ({"atmosphere.r0_cm": [10]}, "sweeps.grid.parameters.atmosphere.r0_cm"),
+        ({"atmosphere": [1]}, "sweeps.grid.parameters.atmosphere"),
+        ({"atmosphere.r0_500nm_m": []}, "sweeps.grid.parameters.atmosphere.r0_500nm_m"),
+    ],
+)
 def test_a_bad_sweep_is_refused_naming_its_key(parameters, key):
     with pytest.raises(ConfigError, match=key.replace(".", r"\.")):
         validate_study(with_sweep(parameters))

@@ -1,6 +1,7 @@
 """MAP tomography: von Karman prior and recovery of a known layered phase."""
 
 import numpy as np
+from reference import layer_reconstructor
 from scipy.ndimage import map_coordinates
 from scipy.special import gamma
 
@@ -14,13 +15,12 @@ from luckyao.tomography.slopes import SlopeGeometry, slope_covariance
 from luckyao.units import ARCSEC_RAD
 from luckyao.wfs.beacons import LgsConfig
 from luckyao.wfs.shack_hartmann import ShackHartmann
-from reference import layer_reconstructor
 
 TELESCOPE = Telescope(4.2, 1.2)
 WFS = ShackHartmann(TELESCOPE, 8, 532e-9)
 LGS = LgsConfig.rayleigh()
 TRUE_HEIGHT_M = 4500.0
-LAYER_R0_M = 0.135 * 3 ** 0.6  # one third of the Cn2 of r0 = 13.5 cm
+LAYER_R0_M = 0.135 * 3**0.6  # one third of the Cn2 of r0 = 13.5 cm
 NOISE_RAD = 0.01 * ARCSEC_RAD
 
 
@@ -39,7 +39,7 @@ def von_karman_screen_m(n, dx_m, r0_m, outer_m, seed):
     rng = np.random.default_rng(seed)
     f = np.fft.fftfreq(n, dx_m)
     f2 = f[:, None] ** 2 + f[None, :] ** 2
-    psd = 0.023 * r0_m ** (-5 / 3) * (f2 + outer_m ** -2) ** (-11 / 6)
+    psd = 0.023 * r0_m ** (-5 / 3) * (f2 + outer_m**-2) ** (-11 / 6)
     psd[0, 0] = 0
     noise = rng.normal(size=(n, n)) + 1j * rng.normal(size=(n, n))
     screen = np.fft.ifft2(noise * np.sqrt(psd) / (n * dx_m)).real * n * n
@@ -64,8 +64,7 @@ def geometric_slopes(directions_rad):
     out = np.zeros((len(directions_rad), 2, WFS.n_valid))
     for b, theta in enumerate(directions_rad):
         for sign in (1, -1):
-            for axis, (px, py) in enumerate([(xc + sign * d / 2 + 0 * e, yc + e),
-                                             (xc + e, yc + sign * d / 2 + 0 * e)]):
+            for axis, (px, py) in enumerate([(xc + sign * d / 2 + 0 * e, yc + e), (xc + e, yc + sign * d / 2 + 0 * e)]):
                 x_l, y_l = cone_coordinates(px, py, TRUE_HEIGHT_M, LGS.height_m, theta)
                 out[b, axis] += sign * screen_at(x_l, y_l).mean(axis=-1) / d
     return out - out.mean(axis=-1, keepdims=True)
@@ -126,8 +125,7 @@ def test_slope_covariance_matches_monte_carlo_screens():
     """Mean squared tilt-removed slope, trace(S)/n (no noise), against slopes of
     12 independent random screens: agreement within 3 Monte-Carlo standard errors."""
     prior = TurbulencePrior(LAYER_R0_M, 20.0, (TRUE_HEIGHT_M,), (1.0,))
-    geometry = SlopeGeometry(WFS.subaperture_xy_m, WFS.subaperture_m,
-                             LGS.directions_rad[:1], LGS.height_m)
+    geometry = SlopeGeometry(WFS.subaperture_xy_m, WFS.subaperture_m, LGS.directions_rad[:1], LGS.height_m)
     expected = np.trace(slope_covariance(prior, geometry, 0.0, n_edge=4)) / geometry.n_slopes
     global SCREEN
     samples = []
@@ -146,6 +144,5 @@ def test_slope_covariance_matches_monte_carlo_screens():
 def test_lgs_rms_and_lucky_frame_combination():
     rec = np.array([[1.0, 0.0], [0.0, -1.0]], dtype=np.float32) * 1e-9 / 1e-6  # m/rad
     slopes = np.array([3e-6, 4e-6]).reshape(1, 2, 1)
-    np.testing.assert_allclose(lgs_rms_nm(rec, slopes), np.sqrt((3**2 + 4**2) / 2) * 1e-3 * 1e3,
-                               rtol=1e-6)
+    np.testing.assert_allclose(lgs_rms_nm(rec, slopes), np.sqrt((3**2 + 4**2) / 2) * 1e-3 * 1e3, rtol=1e-6)
     np.testing.assert_allclose(lucky_frame_rms_nm(np.array([3.0, 4.0])), np.sqrt(12.5))

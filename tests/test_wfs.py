@@ -2,16 +2,16 @@
 
 import numpy as np
 import pytest
+from reference import reference_exposure_images
 
 from luckyao.optics.pupil import Telescope
 from luckyao.units import ARCSEC_RAD
 from luckyao.wfs import shack_hartmann as sh
+from luckyao.wfs.beacons import LgsConfig
 from luckyao.wfs.centroiders import centroids_rad
+from luckyao.wfs.codelets import Codelet, dft, term_value
 from luckyao.wfs.detector import add_noise
 from luckyao.wfs.sensor import measure_slopes
-from luckyao.wfs.beacons import LgsConfig
-from luckyao.wfs.codelets import Codelet, dft, term_value
-from reference import reference_exposure_images
 
 TELESCOPE = Telescope(4.2, 1.2)
 WAVELENGTH_M = 532e-9
@@ -122,12 +122,11 @@ def test_uplink_tilt_moves_every_spot_like_a_wavefront_tilt():
     uplink = (2 * np.pi * theta * y / WAVELENGTH_M)[None, None]
     flat_up = np.zeros_like(uplink)
     flat_down = np.zeros((1, 1) + wfs.grid.xy_m[0].shape)
-    reference = centroids_rad(wfs, sh.exposure_images(wfs, flat_down, WAVELENGTH_M,
-                                                         uplink_phase_rad=flat_up))
-    moved = centroids_rad(wfs, sh.exposure_images(wfs, flat_down, WAVELENGTH_M,
-                                                     uplink_phase_rad=uplink))
-    tilted = centroids_rad(wfs, sh.exposure_images(wfs, tilt_phase(wfs, 0.0, theta),
-                                                      WAVELENGTH_M, uplink_phase_rad=flat_up))
+    reference = centroids_rad(wfs, sh.exposure_images(wfs, flat_down, WAVELENGTH_M, uplink_phase_rad=flat_up))
+    moved = centroids_rad(wfs, sh.exposure_images(wfs, flat_down, WAVELENGTH_M, uplink_phase_rad=uplink))
+    tilted = centroids_rad(
+        wfs, sh.exposure_images(wfs, tilt_phase(wfs, 0.0, theta), WAVELENGTH_M, uplink_phase_rad=flat_up)
+    )
     shift = (moved - reference)[0]
     assert np.all(shift[1] > 0.9 * theta)
     np.testing.assert_allclose(moved, tilted, rtol=1e-3, atol=1e-4 * theta)
@@ -158,8 +157,9 @@ def test_the_wfs_reads_only_its_sensed_samples(n_sub):
     assert wfs.sensed_mask.sum() < wfs.mask.sum()  # some pupil samples are in invalid sub-apertures
     phase = np.random.default_rng(4).normal(0.0, 2.0, (2, 1) + wfs.mask.shape).astype(np.float32)
     sensed = np.where(wfs.sensed_mask, phase, np.float32(0.0))
-    np.testing.assert_array_equal(sh.exposure_images(wfs, sensed, WAVELENGTH_M),
-                                  sh.exposure_images(wfs, phase, WAVELENGTH_M))
+    np.testing.assert_array_equal(
+        sh.exposure_images(wfs, sensed, WAVELENGTH_M), sh.exposure_images(wfs, phase, WAVELENGTH_M)
+    )
 
 
 def test_two_steps_average_and_noise_is_off_by_default():
@@ -167,8 +167,7 @@ def test_two_steps_average_and_noise_is_off_by_default():
     a = tilt_phase(wfs, 0.1 * ARCSEC_RAD, 0.0)[0]
     b = tilt_phase(wfs, -0.1 * ARCSEC_RAD, 0.05 * ARCSEC_RAD)[0]
     both = sh.exposure_images(wfs, np.stack([a, b]), WAVELENGTH_M)
-    mean = 0.5 * (sh.exposure_images(wfs, a[None], WAVELENGTH_M)
-                  + sh.exposure_images(wfs, b[None], WAVELENGTH_M))
+    mean = 0.5 * (sh.exposure_images(wfs, a[None], WAVELENGTH_M) + sh.exposure_images(wfs, b[None], WAVELENGTH_M))
     np.testing.assert_allclose(both, mean, atol=1e-6)
     slopes = measure_slopes(wfs, np.stack([a, a]), WAVELENGTH_M)
     again = measure_slopes(wfs, np.stack([a, a]), WAVELENGTH_M)
@@ -187,13 +186,14 @@ def test_centroid_noise_follows_photon_and_read_noise_theory():
     photons, read_noise_e, draws = 400.0, 1.0, 4000
     rng = np.random.default_rng(1)
     x_rad = wfs.pixel_centres_rad
-    centroids = np.stack([centroids_rad(wfs, add_noise(images, photons, read_noise_e, rng))
-                          for _ in range(draws)])  # (draw, beacon, axis, valid)
+    centroids = np.stack(
+        [centroids_rad(wfs, add_noise(images, photons, read_noise_e, rng)) for _ in range(draws)]
+    )  # (draw, beacon, axis, valid)
     flux = photons * images[0].sum(axis=(-1, -2))  # (valid,) detected photons
     p = images[0] / images[0].sum(axis=(-1, -2), keepdims=True)  # (valid, y, x)
     x_c = np.einsum("vyx,x->v", p, x_rad)
     dx2 = (x_rad[None, None, :] - x_c[:, None, None]) ** 2
-    expected = np.sum(dx2 * (flux[:, None, None] * p + read_noise_e ** 2), axis=(-1, -2)) / flux ** 2
+    expected = np.sum(dx2 * (flux[:, None, None] * p + read_noise_e**2), axis=(-1, -2)) / flux**2
     measured = centroids[:, 0, 0].var(axis=0)
     np.testing.assert_allclose(measured.mean() / expected.mean(), 1.0, atol=0.03)
     assert np.all(np.abs(measured / expected - 1) < 0.12)  # each sub-aperture: > 5 sigma
@@ -248,11 +248,12 @@ def float64_exposure_images(wfs, downlink, phase_wavelength_m, elongation, uplin
     fields, OTF products, exact pixel integrals), as a precision reference."""
     m, n_s = wfs.fft_size, wfs.samples_per_subaperture
     ratio = phase_wavelength_m / wfs.wavelength_m
-    intensity = sum(np.abs(np.fft.fft2(wfs.amplitude * np.exp(1j * ratio * wfs._split(step)),
-                                       s=(m, m))) ** 2 for step in downlink.astype(float))
+    intensity = sum(
+        np.abs(np.fft.fft2(wfs.amplitude * np.exp(1j * ratio * wfs._split(step)), s=(m, m))) ** 2
+        for step in downlink.astype(float)
+    )
     spectra = np.fft.rfft2(intensity) / (m * m * n_s**2 * len(downlink))
-    spot = np.abs(np.fft.fft2(wfs.launch_mask * np.exp(1j * ratio * uplink.astype(float)),
-                              s=(m, m))) ** 2
+    spot = np.abs(np.fft.fft2(wfs.launch_mask * np.exp(1j * ratio * uplink.astype(float)), s=(m, m))) ** 2
     otf = np.fft.rfft2(spot.sum(axis=0))
     spectra *= elongation * (otf / otf[:, :1, :1].real)[:, None]
     e_y, e_x = (e.astype(complex) for e in wfs._pixel_integrals)
@@ -291,8 +292,9 @@ def test_writable_elongation_is_read_at_every_call():
     writable = elongation.copy()
     np.testing.assert_array_equal(sh.exposure_images(wfs, phase, WAVELENGTH_M, writable), long)
     writable[:] = 1.0
-    np.testing.assert_array_equal(sh.exposure_images(wfs, phase, WAVELENGTH_M, writable),
-                                  sh.exposure_images(wfs, phase, WAVELENGTH_M))
+    np.testing.assert_array_equal(
+        sh.exposure_images(wfs, phase, WAVELENGTH_M, writable), sh.exposure_images(wfs, phase, WAVELENGTH_M)
+    )
 
 
 @pytest.mark.parametrize("n_fft, n_in, n_out", [(32, 16, 32), (32, 32, 23), (16, 8, 16), (8, 3, 5)])
@@ -300,15 +302,17 @@ def test_dft_codelet_matches_numpy_fft(n_fft, n_in, n_out):
     """The generated split-radix statements (inputs beyond ``n_in`` pruned as zeros,
     only the outputs |q| < (n_out + 1) / 2 kept) compute the DFT."""
     codelet = Codelet()
-    inputs = [(codelet.input(f"xr{i}"), codelet.input(f"xi{i}")) if i < n_in else (None, None)
-              for i in range(n_fft)]
+    inputs = [(codelet.input(f"xr{i}"), codelet.input(f"xi{i}")) if i < n_in else (None, None) for i in range(n_fft)]
     half = (n_out + 1) // 2
     wanted = [dft(codelet, inputs)[q % n_fft] for q in range(1 - half, half)]
     x = np.random.default_rng(n_fft).normal(size=(2, n_in))
-    namespace = {"np": np, **{f"xr{i}": x[0, i] for i in range(n_in)},
-                 **{f"xi{i}": x[1, i] for i in range(n_in)}, **codelet.constants}
+    namespace = {
+        "np": np,
+        **{f"xr{i}": x[0, i] for i in range(n_in)},
+        **{f"xi{i}": x[1, i] for i in range(n_in)},
+        **codelet.constants,
+    }
     exec("\n".join(codelet.source([t for v in wanted for t in v], "")), namespace)  # noqa: S102
-    got = [eval(term_value(re), namespace) + 1j * eval(term_value(im), namespace)
-           for re, im in wanted]
+    got = [eval(term_value(re), namespace) + 1j * eval(term_value(im), namespace) for re, im in wanted]
     expected = np.fft.fft(x[0] + 1j * x[1], n_fft)[np.arange(1 - half, half) % n_fft]
     np.testing.assert_allclose(got, expected, rtol=0, atol=1e-6 * np.abs(expected).max())

@@ -25,8 +25,18 @@ TINY = REPO / "tests" / "data" / "tiny.yaml"
 def snakemake(workdir: Path, *args):
     """Snakemake on the repository's workflow in ``workdir``, whose study config is
     ``workdir/config/config.yaml`` (the workflow's ``configfile:``)."""
-    command = [sys.executable, "-m", "snakemake", "-s", str(REPO / "Snakefile"), "-d", str(workdir),
-               "--cores", "2", *args]
+    command = [
+        sys.executable,
+        "-m",
+        "snakemake",
+        "-s",
+        str(REPO / "Snakefile"),
+        "-d",
+        str(workdir),
+        "--cores",
+        "2",
+        *args,
+    ]
     return subprocess.run(command, capture_output=True, text=True, timeout=600)
 
 
@@ -113,8 +123,7 @@ def test_a_field_star_selecting_itself_is_the_single_target_case(finished_run):
     compared = 0
     for name, var in single.data_vars.items():
         if "target" in var.dims and name in field:
-            np.testing.assert_array_equal(field[name].isel(target=0).values, var.isel(target=0).values,
-                                          err_msg=name)
+            np.testing.assert_array_equal(field[name].isel(target=0).values, var.isel(target=0).values, err_msg=name)
             compared += 1
     assert compared >= 15
     assert np.isfinite(field.strehl.sel(detector="noiseless").values).all()
@@ -196,8 +205,11 @@ def test_a_hard_kill_mid_study_is_recovered_by_the_study_command(finished_run, t
     workdir = tmp_path / "killed"
     shutil.copytree(done, workdir, symlinks=True)  # copy2: modification times kept
     shutil.rmtree(workdir / "results" / "cases" / "good")
-    figures = [fig for fig, spec in yaml.safe_load(config.read_text())["figures"].items()
-               if "good" in (spec.get("cases") or [])]
+    figures = [
+        fig
+        for fig, spec in yaml.safe_load(config.read_text())["figures"].items()
+        if "good" in (spec.get("cases") or [])
+    ]
     assert figures
     for path in [*workdir.glob("logs/*/good.log"), *(p for fig in figures for p in workdir.glob(f"figures/{fig}.*"))]:
         path.unlink()
@@ -273,8 +285,10 @@ def test_a_study_too_large_for_this_machine_is_refused_before_any_job(tmp_path, 
     study = yaml.safe_load(TINY.read_text())
     if what == "duration":
         study["turbulence"]["duration_s"] = study["base"]["duration_s"] = 1e7
-        expected = (r"the study's files not yet made need about [\d,.]+ GB together \(.*phase screens [\d,.]+ GB.*\), "
-                    r"more than the [\d,.]+ GB free")
+        expected = (
+            r"the study's files not yet made need about [\d,.]+ GB together \(.*phase screens [\d,.]+ GB.*\), "
+            r"more than the [\d,.]+ GB free"
+        )
     else:
         study["cases"]["lgs"]["wfs"] = {"n_subapertures": 1000}
         expected = r"job reconstructor reconstructor_\w+ needs about [\d,.]+ GB of memory, more than the [\d,.]+ GB"
@@ -297,8 +311,9 @@ def test_a_sweep_figure_draws_every_point_and_a_new_value_reruns_only_its_case(f
         lucky = baseline(workdir / "results" / "cases" / case / "lucky.nc")
         expected = lucky.sel(criterion="strehl", detector="noiseless", fraction=[0.1, 1.0]).isel(target=0)
         for name in ("strehl", "strehl_error", "d50_arcsec"):
-            np.testing.assert_array_equal(sweep[name].isel(series=0, x=j).sel(criterion="strehl").values,
-                                          expected[name].values)
+            np.testing.assert_array_equal(
+                sweep[name].isel(series=0, x=j).sel(criterion="strehl").values, expected[name].values
+            )
     study = yaml.safe_load(config.read_text())
     study["sweeps"]["r0"]["parameters"]["atmosphere.r0_500nm_m"].append(0.3)
     jobs = planned_after_edit(workdir, study)
@@ -322,15 +337,21 @@ def test_fits_images_read_back_with_their_header_and_flux(finished_run):
             cell = lucky.sel(criterion="strehl", fraction=0.1, detector=detector).isel(target=0)
             image = hdus[f"LUCKY_T0_STREHL_0.1_{detector.upper()}"]
             np.testing.assert_array_equal(image.data, cell.image.values)
-            for key, name in (("STREHL", "strehl"), ("STREHLE", "strehl_error"), ("FWHM", "fwhm_arcsec"),
-                              ("D50", "d50_arcsec"), ("D50E", "d50_arcsec_error")):
+            for key, name in (
+                ("STREHL", "strehl"),
+                ("STREHLE", "strehl_error"),
+                ("FWHM", "fwhm_arcsec"),
+                ("D50", "d50_arcsec"),
+                ("D50E", "d50_arcsec_error"),
+            ):
                 assert image.header[key] == pytest.approx(float(cell[name]), rel=1e-15), key  # a card's 20 digits
             assert image.header["FLUXFRAC"] == pytest.approx(1.0, abs=1e-5)
             assert float(image.data.sum(dtype=np.float64)) == pytest.approx(1.0, abs=1e-5)
             assert image.header["DETECTOR"] == detector and image.header["CRITERIO"] == "strehl"
         header = hdus["LONG_T0_NONE_NOISELESS"].header
-        assert header["STREHL"] == pytest.approx(float(lucky.long_exposure_strehl.sel(
-            recentring="none", detector="noiseless").isel(target=0)), rel=1e-15)
+        assert header["STREHL"] == pytest.approx(
+            float(lucky.long_exposure_strehl.sel(recentring="none", detector="noiseless").isel(target=0)), rel=1e-15
+        )
         assert header["STREHLE"] == pytest.approx(float(lucky.long_exposure_strehl_error.isel(target=0)), rel=1e-15)
         assert header["CFGHASH"] == lucky.attrs["config_sha256"] and header["SEED"] == 7
         assert header["CODEVER"] == lucky.attrs["code_version"][:68] and header["WAVELENG"] == 8e-7
@@ -351,7 +372,8 @@ def test_the_psf_gallery_shows_each_image_in_units_of_the_diffraction_limited_pe
     np.testing.assert_allclose(brightest, gallery.strehl.values, rtol=1e-5)
     ltao = baseline(workdir / "results" / "cases" / "ltao" / "lucky.nc")
     assert float(gallery.strehl.sel(case="ltao", panel="image Strehl, 10 %")) == float(
-        ltao.strehl.sel(criterion="strehl", fraction=0.1, detector="noiseless").isel(target=0))
+        ltao.strehl.sel(criterion="strehl", fraction=0.1, detector="noiseless").isel(target=0)
+    )
 
 
 def test_the_python_api_opens_results_and_reruns_a_case_to_the_same_numbers(finished_run, tmp_path):
@@ -379,7 +401,7 @@ def test_the_report_has_short_captions_and_no_settings_json(finished_run):
     result = snakemake(workdir, "--report", str(workdir / "report.html"))
     assert result.returncode == 0, result.stderr[-3000:]
     html = (workdir / "report.html").read_text()
-    assert "case_configs" not in html and 'settings={' not in html
+    assert "case_configs" not in html and "settings={" not in html
     assert "Integrated-image quality vs a swept parameter" in html
     assert "no AO, r0 20 cm" in html  # the case good, in short
 
@@ -400,7 +422,11 @@ def test_registration_methods_along_their_dimension_and_the_knees(finished_run):
     figure = xr.open_dataset(workdir / "figures" / "registration.nc")
     assert list(figure.registration.values) == ["cog", "xcorr"]
     assert figure.strehl_knee_photons.dims == ("registration", "case", "criterion", "fraction", "read_noise")
-    result = subprocess.run([sys.executable, "-m", "luckyao", "knees", str(workdir / "figures" / "registration.nc")],
-                            capture_output=True, text=True, timeout=120)
+    result = subprocess.run(
+        [sys.executable, "-m", "luckyao", "knees", str(workdir / "figures" / "registration.nc")],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert result.returncode == 0, result.stderr
     assert "| xcorr |" in result.stdout and "| cog |" in result.stdout

@@ -8,8 +8,10 @@ import re
 import subprocess
 import sys
 
-KEPT = ("Specify a conda environment or container for each rule.",
-        "Shell command directly uses variable LUCKYAO from outside of the rule")
+KEPT = (
+    "Specify a conda environment or container for each rule.",
+    "Shell command directly uses variable LUCKYAO from outside of the rule",
+)
 
 done = subprocess.run([sys.executable, "-m", "snakemake", "--lint", "--cores", "1"], capture_output=True, text=True)
 lints = re.findall(r"^    \* (.+?):?$", done.stdout + done.stderr, flags=re.M)

@@ -4,12 +4,11 @@
 in each, autodoc's ``automodule`` of every listed module with its public members.
 """
 
+from api_modules import API_MODULES
 from docutils import nodes
 from docutils.statemachine import StringList
 from sphinx.util.docutils import SphinxDirective
 from sphinx.util.nodes import nested_parse_with_titles
-
-from api_modules import API_MODULES
 
 
 def reference_rst() -> list[str]:

@@ -32,35 +32,65 @@ SECTIONS = [
     ("Top level", "", ("",), "The study's seed and whether frame cubes are kept."),
     ("turbulence", "turbulence", ("properties", "turbulence"), None),
     ("lucky", "lucky", ("properties", "lucky"), None),
-    ("lucky.detectors.<name>", "lucky.detectors.<name>",
-     ("properties", "lucky", "properties", "detectors", "additionalProperties"), None),
+    (
+        "lucky.detectors.<name>",
+        "lucky.detectors.<name>",
+        ("properties", "lucky", "properties", "detectors", "additionalProperties"),
+        None,
+    ),
     ("lucky.detector_sweep", "lucky.detector_sweep", ("properties", "lucky", "properties", "detector_sweep"), None),
-    ("base: the case", "base", ("definitions", "case"),
-     "``base`` is the system every case starts from; a case of ``cases`` (and a point of a sweep) "
-     "overrides any of these keys."),
+    (
+        "base: the case",
+        "base",
+        ("definitions", "case"),
+        "``base`` is the system every case starts from; a case of ``cases`` (and a point of a sweep) "
+        "overrides any of these keys.",
+    ),
     ("base.telescope", "base.telescope", ("definitions", "case", "properties", "telescope"), None),
     ("base.atmosphere", "base.atmosphere", ("definitions", "case", "properties", "atmosphere"), None),
     ("base.camera", "base.camera", ("definitions", "case", "properties", "camera"), None),
     ("base.ao", "base.ao", ("definitions", "case", "properties", "ao"), None),
-    ("base.ao.apodisation", "base.ao.apodisation",
-     ("definitions", "case", "properties", "ao", "properties", "apodisation"), None),
+    (
+        "base.ao.apodisation",
+        "base.ao.apodisation",
+        ("definitions", "case", "properties", "ao", "properties", "apodisation"),
+        None,
+    ),
     ("base.lgs", "base.lgs", ("definitions", "case", "properties", "lgs"), None),
     ("base.wfs", "base.wfs", ("definitions", "case", "properties", "wfs"), None),
     ("base.tomography", "base.tomography", ("definitions", "case", "properties", "tomography"), None),
     ("cases", "cases", ("properties", "cases"), None),
     ("sweeps.<name>", "sweeps.<name>", ("properties", "sweeps", "additionalProperties"), None),
     ("figures.<id>", "figures.<id>", ("properties", "figures", "additionalProperties"), None),
-    ("figures.<id>.pairs[]", "figures.<id>.pairs[]",
-     ("properties", "figures", "additionalProperties", "properties", "pairs", "items"), None),
+    (
+        "figures.<id>.pairs[]",
+        "figures.<id>.pairs[]",
+        ("properties", "figures", "additionalProperties", "properties", "pairs", "items"),
+        None,
+    ),
     ("selection (a pair's a and b)", "selection", ("definitions", "selection"), None),
 ]
-NESTED = {"turbulence": "turbulence", "lucky": "lucky", "lucky.detectors": "lucky.detectors.<name>",
-          "lucky.detector_sweep": "lucky.detector_sweep", "base": "base", "cases": "cases",
-          "base.telescope": "base.telescope", "base.atmosphere": "base.atmosphere", "base.camera": "base.camera",
-          "base.ao": "base.ao", "base.ao.apodisation": "base.ao.apodisation", "base.lgs": "base.lgs",
-          "base.wfs": "base.wfs", "base.tomography": "base.tomography", "sweeps": "sweeps.<name>",
-          "figures": "figures.<id>", "figures.<id>.pairs": "figures.<id>.pairs[]",
-          "figures.<id>.pairs[].a": "selection", "figures.<id>.pairs[].b": "selection"}
+NESTED = {
+    "turbulence": "turbulence",
+    "lucky": "lucky",
+    "lucky.detectors": "lucky.detectors.<name>",
+    "lucky.detector_sweep": "lucky.detector_sweep",
+    "base": "base",
+    "cases": "cases",
+    "base.telescope": "base.telescope",
+    "base.atmosphere": "base.atmosphere",
+    "base.camera": "base.camera",
+    "base.ao": "base.ao",
+    "base.ao.apodisation": "base.ao.apodisation",
+    "base.lgs": "base.lgs",
+    "base.wfs": "base.wfs",
+    "base.tomography": "base.tomography",
+    "sweeps": "sweeps.<name>",
+    "figures": "figures.<id>",
+    "figures.<id>.pairs": "figures.<id>.pairs[]",
+    "figures.<id>.pairs[].a": "selection",
+    "figures.<id>.pairs[].b": "selection",
+}
 """Keys that have a section of their own: the section their row points to."""
 
 
@@ -128,7 +158,7 @@ def _rst_text(text: str) -> str:
     rest escaped so that no character of it is taken as markup."""
     out, last = [], 0
     for match in IDENTIFIER.finditer(text):
-        out.append(SPECIAL.sub(r"\\\1", text[last:match.start()]))
+        out.append(SPECIAL.sub(r"\\\1", text[last : match.start()]))
         out.append(f"``{match.group(1)}``")
         last = match.end()
     out.append(SPECIAL.sub(r"\\\1", text[last:]))
@@ -140,7 +170,7 @@ def split_unit(description: str) -> tuple[str, str]:
     match = UNIT.search(description)
     if not match:
         return description, ""
-    text = (description[:match.start()].rstrip() + description[match.end():]).strip()
+    text = (description[: match.start()].rstrip() + description[match.end() :]).strip()
     return text, match.group(1)
 
 
@@ -198,8 +228,18 @@ def reference_rst(schema: dict, config: dict) -> list[str]:
             if key_path == "cases":
                 lines += ["Each value is a mapping of the keys of :ref:`config-base` (only those that differ).", ""]
             continue
-        lines += [".. list-table::", "   :header-rows: 1", "   :widths: 17 15 9 17 42", "   :class: config-table",
-                  "", "   * - key", "     - type", "     - unit", "     - default", "     - description"]
+        lines += [
+            ".. list-table::",
+            "   :header-rows: 1",
+            "   :widths: 17 15 9 17 42",
+            "   :class: config-table",
+            "",
+            "   * - key",
+            "     - type",
+            "     - unit",
+            "     - default",
+            "     - description",
+        ]
         for row in rows:
             lines.append(f"   * - {row[0]}")
             lines += [f"     - {cell}" if cell else "     -" for cell in row[1:]]
@@ -224,8 +264,9 @@ class ConfigReference(SphinxDirective):
         with open(DEFAULT_CONFIG) as f:
             config = yaml.safe_load(f)
         container = nodes.container()
-        nested_parse_with_titles(self.state, StringList(reference_rst(schema, config), source=str(SCHEMA_PATH)),
-                                 container)
+        nested_parse_with_titles(
+            self.state, StringList(reference_rst(schema, config), source=str(SCHEMA_PATH)), container
+        )
         return container.children
 
 

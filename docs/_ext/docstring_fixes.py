@@ -17,8 +17,10 @@ ROLE = re.compile(r":(mod|class|func|meth|attr|data|exc):`(~?)\.([A-Za-z_][\w.]*
 FIXES = {
     # object name (its end: the module may move) -> [(text, replacement)]
     "geometry.footprint_coverage": [("``n_samples``^2 points", "``n_samples`` squared points")],
-    "scoring.integrated_images": [("(criterion, fraction, det, *item)", "(criterion, fraction, det, \\*item)"),
-                                  ("(det, criterion x bin, *item)", "(det, criterion x bin, \\*item)")],
+    "scoring.integrated_images": [
+        ("(criterion, fraction, det, *item)", "(criterion, fraction, det, \\*item)"),
+        ("(det, criterion x bin, *item)", "(det, criterion x bin, \\*item)"),
+    ],
 }
 USAGE = {"cli"}
 """Module docstrings whose lines after the first paragraph are a usage block (shown literally)."""
@@ -73,10 +75,14 @@ def _matches(name: str, key: str) -> bool:
 
 
 def mend(app, what, name, obj, options, lines):
-    if (what == "module" and any(_matches(name, key) for key in USAGE) and "" in lines
-            and not any(line.rstrip().endswith("::") for line in lines)):
+    if (
+        what == "module"
+        and any(_matches(name, key) for key in USAGE)
+        and "" in lines
+        and not any(line.rstrip().endswith("::") for line in lines)
+    ):
         blank = lines.index("")
-        lines[:] = [*lines[:blank], "", "::", "", *("    " + line if line else "" for line in lines[blank + 1:])]
+        lines[:] = [*lines[:blank], "", "::", "", *("    " + line if line else "" for line in lines[blank + 1 :])]
     for key, fixes in FIXES.items():
         if _matches(name, key):
             text = "\n".join(lines)

@@ -32,8 +32,15 @@ print(ltao.case.values)
 fig, ax = plt.subplots(figsize=(6.4, 4.2), layout="constrained")
 for case in ("ltao_r0_13.5cm", "ltao_wfs16", "ltao_wfs32", "noao_r0_13.5cm"):
     curve = ltao.sel(case=case, criterion="strehl")
-    ax.errorbar(100 * curve.fraction, curve.strehl, yerr=curve.strehl_error, marker="o", ms=3,
-                capsize=2, label=str(curve.label.values))
+    ax.errorbar(
+        100 * curve.fraction,
+        curve.strehl,
+        yerr=curve.strehl_error,
+        marker="o",
+        ms=3,
+        capsize=2,
+        label=str(curve.label.values),
+    )
 ax.set_xscale("log")
 ax.set_xlabel("frames kept [%]")
 ax.set_ylabel("integrated-image Strehl at 800 nm")

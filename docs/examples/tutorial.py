@@ -39,8 +39,9 @@ study["base"]["duration_s"] = 0.5
 # workflow's own steps run as the workflow runs them, without Snakemake: screens, WFS
 # calibration, tomographic reconstructor, AO command matrix, time loop, lucky imaging (the
 # same config and seed give the workflow's numbers).
-lucky = luckyao.run_case(study, {"ao": {"mode": "ltao"}, "atmosphere": {"r0_500nm_m": 0.10}},
-                         name="ltao_r0_10cm", workdir=out / "run")
+lucky = luckyao.run_case(
+    study, {"ao": {"mode": "ltao"}, "atmosphere": {"r0_500nm_m": 0.10}}, name="ltao_r0_10cm", workdir=out / "run"
+)
 
 # %%
 # 3. Its results
@@ -52,8 +53,10 @@ lucky = luckyao.run_case(study, {"ao": {"mode": "ltao"}, "atmosphere": {"r0_500n
 best = lucky.strehl.sel(registration="cog", detector="noiseless", criterion="lgs_rms").isel(target=0)
 error = lucky.strehl_error.sel(registration="cog", detector="noiseless", criterion="lgs_rms").isel(target=0)
 for fraction in best.fraction.values:
-    print(f"selection by lgs_rms, {100 * fraction:5.1f} % of frames: Strehl "
-          f"{float(best.sel(fraction=fraction)):.4f} ± {float(error.sel(fraction=fraction)):.4f}")
+    print(
+        f"selection by lgs_rms, {100 * fraction:5.1f} % of frames: Strehl "
+        f"{float(best.sel(fraction=fraction)):.4f} ± {float(error.sel(fraction=fraction)):.4f}"
+    )
 long_exposure = lucky.long_exposure_strehl.sel(registration="cog", detector="noiseless", recentring="none")
 print(f"long exposure (all frames, no recentring): Strehl {float(long_exposure.isel(target=0)):.4f}")
 
@@ -68,8 +71,10 @@ from astropy.io import fits  # noqa: E402
 
 with fits.open(fits_path) as hdus:
     header = hdus["LUCKY_T0_LGS_RMS_0.01_NOISELESS"].header
-    print(f"{fits_path}: {n_images} images; 1 % by lgs_rms: Strehl {header['STREHL']:.4f} ± {header['STREHLE']:.4f}, "
-          f"{header['CDELT1']:.4f} arcsec/pixel, {header['WAVELENG'] * 1e9:.0f} nm")
+    print(
+        f"{fits_path}: {n_images} images; 1 % by lgs_rms: Strehl {header['STREHL']:.4f} ± {header['STREHLE']:.4f}, "
+        f"{header['CDELT1']:.4f} arcsec/pixel, {header['WAVELENG'] * 1e9:.0f} nm"
+    )
 
 # %%
 # 5. A finished study

@@ -26,7 +26,8 @@ import xarray as xr
 
 from .studyspec.lucky import SIGNAL_KINDS
 from .studyspec.schema import ConfigError
-from .studyspec.study import load_study as _load_study, validate_study
+from .studyspec.study import load_study as _load_study
+from .studyspec.study import validate_study
 from .threads import ONE_THREAD
 
 __all__ = ["open_case", "open_telemetry", "open_figure", "draw", "load_study", "run_case", "export_fits"]
@@ -87,8 +88,9 @@ def _step(*argv: str) -> None:
     """One workflow step, run as the workflow runs it: ``python -m luckyao <step> ...``
     with the libraries on one thread (:mod:`luckyao.threads`, as the workflow runs every step: the
     same rounding, so the same numbers); a failure raises with the step's own message."""
-    done = subprocess.run([sys.executable, "-m", "luckyao", *argv], env={**os.environ, **ONE_THREAD},
-                          capture_output=True, text=True)
+    done = subprocess.run(
+        [sys.executable, "-m", "luckyao", *argv], env={**os.environ, **ONE_THREAD}, capture_output=True, text=True
+    )
     if done.returncode:
         last = (done.stderr.strip().splitlines() or ["no message"])[-1]
         raise RuntimeError(f"luckyao {argv[0]} failed: {last}")
@@ -104,10 +106,18 @@ def run_case(study: dict, case, name: str = "explore", workdir=None) -> xr.Datas
     is the ``simulate`` step's, :class:`luckyao.steps.simulation.TimeLoop` (its LGS
     chain measured in the loop: the numbers of the workflow's replayed slopes and LGS twins,
     ``tests/test_ao_loop.py``)."""
-    from .studyspec.products import (calibration_key, calibration_spec, commands_key, commands_spec, reconstructor_key,
-                                reconstructor_spec, turbulence_key, turbulence_spec)
     from .io.hashing import canonical_json
     from .studyspec.lucky import lucky_settings
+    from .studyspec.products import (
+        calibration_key,
+        calibration_spec,
+        commands_key,
+        commands_spec,
+        reconstructor_key,
+        reconstructor_spec,
+        turbulence_key,
+        turbulence_spec,
+    )
 
     study = copy.deepcopy(study)
     if isinstance(case, dict):
@@ -119,10 +129,16 @@ def run_case(study: dict, case, name: str = "explore", workdir=None) -> xr.Datas
     else:
         raise ConfigError(f"run_case: no case {case!r} in the study; give its name or a dict of overrides of base")
     # the case alone, with the figures that change its post-processing (the detector sweep)
-    signal = {f: dict(v, cases=[name]) for f, v in study.get("figures", {}).items()
-              if v["kind"] in SIGNAL_KINDS and name in v.get("cases", [])}
-    study = {**{k: v for k, v in study.items() if k != "sweeps"}, "cases": {name: study["cases"][name]},
-             "figures": signal}
+    signal = {
+        f: dict(v, cases=[name])
+        for f, v in study.get("figures", {}).items()
+        if v["kind"] in SIGNAL_KINDS and name in v.get("cases", [])
+    }
+    study = {
+        **{k: v for k, v in study.items() if k != "sweeps"},
+        "cases": {name: study["cases"][name]},
+        "figures": signal,
+    }
     cases = validate_study(study)
     resolved = cases[name]
     scratch = workdir is None
@@ -133,24 +149,60 @@ def run_case(study: dict, case, name: str = "explore", workdir=None) -> xr.Datas
         screens = root / f"{turbulence_key(turbulence)}.npy"
         metadata = screens.with_suffix(".nc")
         if not metadata.exists():
-            _step("turbulence", "--spec", canonical_json(turbulence), "--screens", str(screens),
-                  "--metadata", str(metadata))
+            _step(
+                "turbulence",
+                "--spec",
+                canonical_json(turbulence),
+                "--screens",
+                str(screens),
+                "--metadata",
+                str(metadata),
+            )
         products = []
-        for spec, key, step in ((reconstructor_spec(resolved), reconstructor_key, "reconstructor"),
-                                (commands_spec(resolved), commands_key, "commands"),
-                                (calibration_spec(study, resolved), calibration_key, "calibration")):
+        for spec, key, step in (
+            (reconstructor_spec(resolved), reconstructor_key, "reconstructor"),
+            (commands_spec(resolved), commands_key, "commands"),
+            (calibration_spec(study, resolved), calibration_key, "calibration"),
+        ):
             path = root / f"{key(spec)}.nc" if spec is not None else None
             if path is not None and not path.exists():
                 _step(step, "--spec", canonical_json(spec), "--out", str(path))
             products += [f"--{step}", str(path) if path else ""]
         frames, telemetry, lucky = (root / name / f for f in ("frames.nc", "telemetry.nc", "lucky.nc"))
         frames.parent.mkdir(exist_ok=True)
-        _step("simulate", "--case", canonical_json(resolved), "--name", name, "--seed", str(study["seed"]),
-              "--screens", str(screens), "--screens-metadata", str(metadata), *products,
-              "--frames", str(frames), "--telemetry", str(telemetry))
-        _step("lucky", "--settings", canonical_json(lucky_settings(study, cases, name)), "--frames", str(frames),
-              "--telemetry", str(telemetry), "--out", str(lucky), "--screens", str(screens),
-              "--screens-metadata", str(metadata))
+        _step(
+            "simulate",
+            "--case",
+            canonical_json(resolved),
+            "--name",
+            name,
+            "--seed",
+            str(study["seed"]),
+            "--screens",
+            str(screens),
+            "--screens-metadata",
+            str(metadata),
+            *products,
+            "--frames",
+            str(frames),
+            "--telemetry",
+            str(telemetry),
+        )
+        _step(
+            "lucky",
+            "--settings",
+            canonical_json(lucky_settings(study, cases, name)),
+            "--frames",
+            str(frames),
+            "--telemetry",
+            str(telemetry),
+            "--out",
+            str(lucky),
+            "--screens",
+            str(screens),
+            "--screens-metadata",
+            str(metadata),
+        )
         return _open(lucky, "lucky")
     finally:
         if scratch:

@@ -1,21 +1,21 @@
 """Command-line interface: one subcommand per workflow step.
 
-    luckyao check CONFIG [OVERLAY ...] [--study-dir DIR] [--mem-mb N]
-    luckyao turbulence --spec JSON --screens S.npy --metadata S.nc
-    luckyao simulate --case JSON --name NAME --seed N --screens S.npy --screens-metadata S.nc
-                     [--reconstructor R.nc] [--commands C.nc] [--calibration W.nc] [--lgs-telemetry T.nc]
-                     --frames F --telemetry T
-    luckyao reconstructor --spec JSON --out R.nc
-    luckyao calibration --spec JSON --out W.nc
-    luckyao commands --spec JSON --out C.nc
-    luckyao lucky --settings JSON --frames F --telemetry T --out lucky.nc [--screens S.npy --screens-metadata S.nc]
-    luckyao figure --id ID (--settings JSON | --settings-file S.json) --out-prefix figures/ID  lucky.nc ...
-    luckyao export lucky.nc --out images.fits [--detector NAME ...]
-    luckyao table figures/longexp.nc
-    luckyao knees figures/registration.nc [--fraction F] [--criterion C] [--read-noise R]
-    luckyao archive [--study-dir DIR] [--configfile OVERLAY ...] [--out A.tar]
-    luckyao verify A.tar [--case NAME | --all-cases] [--workdir DIR] [--rtol R] [--atol A] [--no-rerun]
-    luckyao lock [--out requirements.lock]
+luckyao check CONFIG [OVERLAY ...] [--study-dir DIR] [--mem-mb N]
+luckyao turbulence --spec JSON --screens S.npy --metadata S.nc
+luckyao simulate --case JSON --name NAME --seed N --screens S.npy --screens-metadata S.nc
+                 [--reconstructor R.nc] [--commands C.nc] [--calibration W.nc] [--lgs-telemetry T.nc]
+                 --frames F --telemetry T
+luckyao reconstructor --spec JSON --out R.nc
+luckyao calibration --spec JSON --out W.nc
+luckyao commands --spec JSON --out C.nc
+luckyao lucky --settings JSON --frames F --telemetry T --out lucky.nc [--screens S.npy --screens-metadata S.nc]
+luckyao figure --id ID (--settings JSON | --settings-file S.json) --out-prefix figures/ID  lucky.nc ...
+luckyao export lucky.nc --out images.fits [--detector NAME ...]
+luckyao table figures/longexp.nc
+luckyao knees figures/registration.nc [--fraction F] [--criterion C] [--read-noise R]
+luckyao archive [--study-dir DIR] [--configfile OVERLAY ...] [--out A.tar]
+luckyao verify A.tar [--case NAME | --all-cases] [--workdir DIR] [--rtol R] [--atol A] [--no-rerun]
+luckyao lock [--out requirements.lock]
 """
 
 import argparse
@@ -28,8 +28,7 @@ import time
 
 
 def _setup_logging() -> None:
-    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(levelname)s %(message)s",
-                        stream=sys.stderr)
+    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(levelname)s %(message)s", stream=sys.stderr)
 
 
 def cmd_check(args) -> int:
@@ -63,8 +62,13 @@ def cmd_turbulence(args) -> None:
     from .steps.screens import write_screens
 
     spec = json.loads(args.spec)
-    write_screens(spec, args.screens, args.metadata, provenance("luckyao normalised phase screens", spec, spec["seed"]),
-                  threads=args.threads)
+    write_screens(
+        spec,
+        args.screens,
+        args.metadata,
+        provenance("luckyao normalised phase screens", spec, spec["seed"]),
+        threads=args.threads,
+    )
 
 
 def cmd_simulate(args) -> None:
@@ -78,8 +82,11 @@ def cmd_simulate(args) -> None:
     config = json.loads(args.case)
     case = Case.from_config(config)
     screens = read_screens(args.screens, args.screens_metadata)
-    reconstructors = (open_dataset(args.reconstructor, "reconstructor", allow_nan=())["reconstructor"].values
-                      if args.reconstructor else None)
+    reconstructors = (
+        open_dataset(args.reconstructor, "reconstructor", allow_nan=())["reconstructor"].values
+        if args.reconstructor
+        else None
+    )
     # an AO case: its LGS slopes measured by their product job
     slopes = RecordedSlopes.open(args.slopes, config, args.seed) if args.slopes else None
     calibration = open_dataset(args.calibration, "WFS calibration", allow_nan=()) if args.calibration else None
@@ -91,15 +98,25 @@ def cmd_simulate(args) -> None:
     attrs = provenance(f"luckyao frames of case {args.name}", config, args.seed)
     imaged = imaged_targets(config)
     start = time.perf_counter()
-    with FrameWriter(args.frames, imaged, case.n_frames, case.camera.n_pixels,
-                     case.camera.pixel_scale_arcsec, attrs) as writer:
-        telemetry = TimeLoop(case, screens, args.seed, reconstructors=reconstructors, calibration=calibration,
-                             slopes=slopes, commands=commands, lgs_rms_nm=lgs_rms_nm, imaged_targets=imaged
-                             ).run(writer.write)
+    with FrameWriter(
+        args.frames, imaged, case.n_frames, case.camera.n_pixels, case.camera.pixel_scale_arcsec, attrs
+    ) as writer:
+        telemetry = TimeLoop(
+            case,
+            screens,
+            args.seed,
+            reconstructors=reconstructors,
+            calibration=calibration,
+            slopes=slopes,
+            commands=commands,
+            lgs_rms_nm=lgs_rms_nm,
+            imaged_targets=imaged,
+        ).run(writer.write)
     elapsed = time.perf_counter() - start
     steps = case.clock.n_steps
-    logging.getLogger(__name__).info("simulated %d steps in %.1f s: %.3f ms per step (with I/O)",
-                                     steps, elapsed, 1e3 * elapsed / steps)
+    logging.getLogger(__name__).info(
+        "simulated %d steps in %.1f s: %.3f ms per step (with I/O)", steps, elapsed, 1e3 * elapsed / steps
+    )
     telemetry.attrs.update(provenance(f"luckyao telemetry of case {args.name}", config, args.seed))
     telemetry.attrs["case"] = args.name
     write_dataset(telemetry, args.telemetry, allow_nan={"axis_strehl"} if len(imaged) < len(case.targets) else ())
@@ -138,8 +155,8 @@ def cmd_commands(args) -> None:
 
 
 def cmd_calibration(args) -> None:
-    from .steps.calibration import build_calibration
     from .io.datasets import provenance, write_dataset
+    from .steps.calibration import build_calibration
 
     spec = json.loads(args.spec)
     ds = build_calibration(spec)
@@ -150,8 +167,7 @@ def cmd_calibration(args) -> None:
 def cmd_lucky(args) -> None:
     from .steps.postprocess import lucky_case
 
-    lucky_case(json.loads(args.settings), args.frames, args.telemetry, args.out, args.screens,
-               args.screens_metadata)
+    lucky_case(json.loads(args.settings), args.frames, args.telemetry, args.out, args.screens, args.screens_metadata)
 
 
 def cmd_figure(args) -> None:
@@ -173,33 +189,42 @@ def cmd_export(args) -> None:
 
 
 def cmd_table(args) -> None:
-    from .io.datasets import open_dataset
     from .figures import long_exposure_markdown
+    from .io.datasets import open_dataset
 
     data = open_dataset(args.data, "long_exposure_table figure data", remake=False)
     if "best_lucky_strehl" not in data:
-        raise ValueError(f"'{args.data}' is not a long_exposure_table figure's data (it has no best_lucky_strehl); "
-                         "give one such as figures/longexp.nc")
+        raise ValueError(
+            f"'{args.data}' is not a long_exposure_table figure's data (it has no best_lucky_strehl); "
+            "give one such as figures/longexp.nc"
+        )
     sys.stdout.write(long_exposure_markdown(data))
 
 
 def cmd_knees(args) -> None:
-    from .io.datasets import open_dataset
     from .figures.registration import knee_markdown
+    from .io.datasets import open_dataset
 
     data = open_dataset(args.data, "registration figure data", remake=False)
     if "strehl_knee_photons" not in data:
-        raise ValueError(f"'{args.data}' is not a registration figure's data (it has no strehl_knee_photons); "
-                         "give one such as figures/registration.nc")
+        raise ValueError(
+            f"'{args.data}' is not a registration figure's data (it has no strehl_knee_photons); "
+            "give one such as figures/registration.nc"
+        )
     fraction = float(data.fraction.values[0]) if args.fraction is None else args.fraction
-    for key, value, coord in (("--fraction", fraction, "fraction"), ("--criterion", args.criterion, "criterion"),
-                              ("--read-noise", args.read_noise, "read_noise")):
+    for key, value, coord in (
+        ("--fraction", fraction, "fraction"),
+        ("--criterion", args.criterion, "criterion"),
+        ("--read-noise", args.read_noise, "read_noise"),
+    ):
         if value not in data[coord].values:
             raise ValueError(f"{key} {value}: '{args.data}' has {list(data[coord].values)}")
-    sys.stdout.write(f"Knees at {100 * fraction:g} % of frames, selection by {args.criterion}, read noise "
-                     f"{args.read_noise:g} e-: the signal from which the integrated Strehl keeps 90 % of its "
-                     "noiseless value and d50 stays within 10 % of it (I magnitude: "
-                     f"{float(data.attrs['i_zero_photons_per_frame']):.3g} photons per frame at I = 0)\n\n")
+    sys.stdout.write(
+        f"Knees at {100 * fraction:g} % of frames, selection by {args.criterion}, read noise "
+        f"{args.read_noise:g} e-: the signal from which the integrated Strehl keeps 90 % of its "
+        "noiseless value and d50 stays within 10 % of it (I magnitude: "
+        f"{float(data.attrs['i_zero_photons_per_frame']):.3g} photons per frame at I = 0)\n\n"
+    )
     sys.stdout.write(knee_markdown(data, fraction, args.criterion, args.read_noise) + "\n")
 
 
@@ -221,8 +246,17 @@ def cmd_verify(args) -> int:
     from .archive.verify import verify
 
     try:
-        agrees = verify(args.archive, args.case, args.workdir, args.rtol, args.atol, args.cores, args.snakefile,
-                        rerun=not args.no_rerun, all_cases=args.all_cases)
+        agrees = verify(
+            args.archive,
+            args.case,
+            args.workdir,
+            args.rtol,
+            args.atol,
+            args.cores,
+            args.snakefile,
+            rerun=not args.no_rerun,
+            all_cases=args.all_cases,
+        )
     except ValueError as err:
         print(f"luckyao verify: FAILED: {err}", file=sys.stderr)
         return 1
@@ -262,16 +296,24 @@ def main(argv=None) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="luckyao", description=__doc__,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = argparse.ArgumentParser(
+        prog="luckyao", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     sub = parser.add_subparsers(dest="command", required=True)
 
-    p = sub.add_parser("check", help="validate a study config (later files are merged over earlier ones) and check "
-                                     "that its jobs fit this machine, as the workflow does before any job")
+    p = sub.add_parser(
+        "check",
+        help="validate a study config (later files are merged over earlier ones) and check "
+        "that its jobs fit this machine, as the workflow does before any job",
+    )
     p.add_argument("config", nargs="+")
     p.add_argument("--study-dir", default=".", help="the study folder whose free disk is checked (default: here)")
-    p.add_argument("--mem-mb", type=int, help="memory of the machine the jobs run on [MB], if larger than this one's "
-                                              "(as Snakemake's --resources mem_mb=N)")
+    p.add_argument(
+        "--mem-mb",
+        type=int,
+        help="memory of the machine the jobs run on [MB], if larger than this one's "
+        "(as Snakemake's --resources mem_mb=N)",
+    )
     p.set_defaults(func=cmd_check)
 
     p = sub.add_parser("turbulence", help="generate the shared normalised phase screens")
@@ -290,8 +332,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--reconstructor", default="", help="reconstructor file (cases with LGS)")
     p.add_argument("--commands", default="", help="AO command-matrix file (cases with AO)")
     p.add_argument("--calibration", default="", help="WFS calibration file (cases with wfs.calibration)")
-    p.add_argument("--lgs-telemetry", default="",
-                   help="telemetry of the AO case that measured this no-AO case's LGS rms (studyspec.products.lgs_twin)")
+    p.add_argument(
+        "--lgs-telemetry",
+        default="",
+        help="telemetry of the AO case that measured this no-AO case's LGS rms (studyspec.products.lgs_twin)",
+    )
     p.add_argument("--slopes", default="", help="LGS slopes product (cases with AO, config.slopes_spec)")
     p.add_argument("--frames", required=True)
     p.add_argument("--telemetry", required=True)

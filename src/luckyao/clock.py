@@ -61,7 +61,7 @@ class FrameClock:
 
     def exposure_starts(self, steps: np.ndarray) -> np.ndarray:
         """The first steps of the exposures of a frame's ``steps`` (:meth:`steps`)."""
-        return steps[::self.exposure_steps]
+        return steps[:: self.exposure_steps]
 
     def exposure(self, step):
         """The exposure holding time step ``step``."""

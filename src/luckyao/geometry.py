@@ -25,12 +25,10 @@ class LineOfSight:
 
 def footprint_m(points_x_m, points_y_m, layer_height_m, los: LineOfSight):
     """Positions (x, y) [m] where rays from pupil points towards ``los`` cross a layer."""
-    return cone_coordinates(points_x_m, points_y_m, layer_height_m, los.height_m,
-                            (los.theta_x_rad, los.theta_y_rad))
+    return cone_coordinates(points_x_m, points_y_m, layer_height_m, los.height_m, (los.theta_x_rad, los.theta_y_rad))
 
 
-def asterism_directions_rad(n_beacons: int, diameter_arcsec: float,
-                            rotation_deg: float = 0.0) -> np.ndarray:
+def asterism_directions_rad(n_beacons: int, diameter_arcsec: float, rotation_deg: float = 0.0) -> np.ndarray:
     """Directions (n, 2) [rad] evenly spaced on a circle of ``diameter_arcsec``.
 
     Beacon ``k`` is at azimuth ``rotation + 2 pi k / n`` (counted from +x
@@ -49,8 +47,7 @@ def footprint_scale(layer_height_m, beacon_height_m):
     return 1.0 - np.asarray(layer_height_m, dtype=float) / beacon_height_m
 
 
-def cone_coordinates(x_m, y_m, layer_height_m: float, beacon_height_m: float,
-                     direction_rad, origin_xy_m=(0.0, 0.0)):
+def cone_coordinates(x_m, y_m, layer_height_m: float, beacon_height_m: float, direction_rad, origin_xy_m=(0.0, 0.0)):
     """Where rays from pupil points ``(x, y)`` [m] to a beacon cross a layer.
 
     Returns ``(x_l, y_l)`` [m] in layer coordinates (same axes as the pupil):
@@ -71,8 +68,9 @@ def uplink_line_of_sight(direction_rad, launch_xy_m, height_m: float) -> LineOfS
     """The line of sight whose cone through points ``p`` of the launch aperture is
     the uplink beam's: anchored on the launch point ``o``, the beam crosses height
     ``h`` at ``o + (p - o) s + theta h = s p + (theta + o / H) h`` (s = 1 - h/H)."""
-    return LineOfSight(direction_rad[0] + launch_xy_m[0] / height_m,
-                       direction_rad[1] + launch_xy_m[1] / height_m, height_m)
+    return LineOfSight(
+        direction_rad[0] + launch_xy_m[0] / height_m, direction_rad[1] + launch_xy_m[1] / height_m, height_m
+    )
 
 
 def footprint_centre_m(los: LineOfSight, layer_height_m: float) -> tuple[float, float]:
@@ -80,8 +78,9 @@ def footprint_centre_m(los: LineOfSight, layer_height_m: float) -> tuple[float, 
     return los.theta_x_rad * layer_height_m, los.theta_y_rad * layer_height_m
 
 
-def footprint_coverage(diameter_m: float, target: LineOfSight, beacons: list[LineOfSight],
-                       layer_height_m: float, n_samples: int = 201) -> float:
+def footprint_coverage(
+    diameter_m: float, target: LineOfSight, beacons: list[LineOfSight], layer_height_m: float, n_samples: int = 201
+) -> float:
     """Fraction of the target's pupil footprint on a layer that at least one beacon's
     footprint covers (discs of diameter ``D (1 - h/H)``, on ``n_samples``^2 points)."""
     grid = np.linspace(-diameter_m / 2, diameter_m / 2, n_samples)

@@ -20,8 +20,14 @@ class Progress:
         now = time.monotonic()
         if self.baseline is None and done < self.total:
             self.baseline = (now, done)
-            log.info("%s %d/%d (%.1f%%), first chunk in %.1f s (ETA from the next)", self.what, done, self.total,
-                     100 * done / max(self.total, 1), now - self.start)
+            log.info(
+                "%s %d/%d (%.1f%%), first chunk in %.1f s (ETA from the next)",
+                self.what,
+                done,
+                self.total,
+                100 * done / max(self.total, 1),
+                now - self.start,
+            )
             self.last = now
             return
         if now - self.last < self.every_s and done < self.total:
@@ -30,5 +36,12 @@ class Progress:
         since, done_then = self.baseline or (self.start, 0)
         rate = (done - done_then) / max(now - since, 1e-9)
         eta = (self.total - done) / rate if rate > 0 else float("inf")
-        log.info("%s %d/%d (%.1f%%), %.1f/s, ETA %.0f s", self.what, done, self.total,
-                 100 * done / max(self.total, 1), rate, eta)
+        log.info(
+            "%s %d/%d (%.1f%%), %.1f/s, ETA %.0f s",
+            self.what,
+            done,
+            self.total,
+            100 * done / max(self.total, 1),
+            rate,
+            eta,
+        )

@@ -63,14 +63,17 @@ def first_lanes(builder, count):
 def load(builder, pointer, mask, vector: ir.VectorType = VECTOR):
     """``pointer[k]`` in the lanes of ``mask`` (others undefined; nothing read there)."""
     name, size = ("f32", 4) if vector.element == F32 else (f"i{vector.element.width}", vector.element.width // 8)
-    return call(builder, f"llvm.masked.load.v{LANES}{name}.p0", vector,
-                [pointer, ir.Constant(_I32, size), mask, ir.Constant(vector, None)])
+    return call(
+        builder,
+        f"llvm.masked.load.v{LANES}{name}.p0",
+        vector,
+        [pointer, ir.Constant(_I32, size), mask, ir.Constant(vector, None)],
+    )
 
 
 def store(builder, value, pointer, mask):
     """``pointer[k] = value[k]`` in the lanes of ``mask``."""
-    call(builder, f"llvm.masked.store.v{LANES}f32.p0", ir.VoidType(),
-         [value, pointer, ir.Constant(_I32, 4), mask])
+    call(builder, f"llvm.masked.store.v{LANES}f32.p0", ir.VoidType(), [value, pointer, ir.Constant(_I32, 4), mask])
 
 
 def gather_pairs(builder, values, index, mask):
@@ -81,12 +84,17 @@ def gather_pairs(builder, values, index, mask):
     pairs = ir.VectorType(ir.DoubleType(), _HALF)
     loaded = []
     for half in halves:
-        pointers = builder.gep(values, [builder.shuffle_vector(index, ir.Constant(index.type, None), half)],
-                               source_etype=F32)
+        pointers = builder.gep(
+            values, [builder.shuffle_vector(index, ir.Constant(index.type, None), half)], source_etype=F32
+        )
         pointers.type = ir.VectorType(ir.PointerType(), _HALF)  # a GEP with a vector index: one address per lane
         lanes = builder.shuffle_vector(mask, ir.Constant(MASK, None), half)
-        got = call(builder, f"llvm.masked.gather.v{_HALF}f64.v{_HALF}p0", pairs,
-                   [pointers, ir.Constant(_I32, 4), lanes, ir.Constant(pairs, None)])
+        got = call(
+            builder,
+            f"llvm.masked.gather.v{_HALF}f64.v{_HALF}p0",
+            pairs,
+            [pointers, ir.Constant(_I32, 4), lanes, ir.Constant(pairs, None)],
+        )
         loaded.append(builder.bitcast(got, VECTOR))
     even = ir.Constant(ir.VectorType(_I32, LANES), list(range(0, 2 * LANES, 2)))
     odd = ir.Constant(ir.VectorType(_I32, LANES), list(range(1, 2 * LANES, 2)))
@@ -130,7 +138,8 @@ def transpose(typingctx, values, offset, index, start, rows, columns, out, out_s
     def codegen(context, builder, signature, args):
         values_, index_, out_ = (context.make_array(signature.args[i])(context, builder, args[i]) for i in (0, 2, 6))
         offset, start, rows, columns, out_start, out_stride = (
-            context.cast(builder, args[i], signature.args[i], types.int64) for i in (1, 3, 4, 5, 7, 8))
+            context.cast(builder, args[i], signature.args[i], types.int64) for i in (1, 3, 4, 5, 7, 8)
+        )
         base = builder.gep(values_.data, [offset])
         in_rows, in_columns = first_lanes(builder, rows), first_lanes(builder, columns)
         starts = load(builder, builder.gep(index_.data, [start]), in_rows, ir.VectorType(_I32, LANES))
@@ -144,8 +153,10 @@ def transpose(typingctx, values, offset, index, start, rows, columns, out, out_s
             high = ir.Constant(ir.VectorType(_I32, LANES), [LANES + c if c & bit else c ^ bit for c in range(LANES)])
             for r in range(LANES):
                 if not r & bit:
-                    block[r], block[r | bit] = (builder.shuffle_vector(block[r], block[r | bit], low),
-                                                builder.shuffle_vector(block[r], block[r | bit], high))
+                    block[r], block[r | bit] = (
+                        builder.shuffle_vector(block[r], block[r | bit], low),
+                        builder.shuffle_vector(block[r], block[r | bit], high),
+                    )
         for c in range(LANES):
             with builder.if_then(builder.icmp_signed("<", ir.Constant(columns.type, c), columns)):
                 point = builder.add(out_start, builder.mul(out_stride, ir.Constant(out_stride.type, c)))

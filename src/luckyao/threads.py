@@ -12,8 +12,7 @@ which pins the BLAS kernels, ``OPENBLAS_CORETYPE``): import it first and call
 
 import os
 
-ONE_THREAD = {name: "1" for name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS",
-                                      "NUMBA_NUM_THREADS")}
+ONE_THREAD = {name: "1" for name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS")}
 """The environment of one thread: each library's thread count, 1."""
 
 

@@ -5,16 +5,16 @@ rule calibration:
         code=step_sources("luckyao.steps.calibration"),
     output:
         "results/calibrations/{wkey}.nc",
-    params:
-        spec=lambda w: canonical_json(CALIBRATION_BY_KEY[w.wkey]),
-    threads: 1
-    priority: 10  # before the screens: the simulations that use it wait for it
-    resources:
-        mem_mb=1500,
-        runtime=5,  # minutes
     log:
         "logs/calibration/{wkey}.log",
     benchmark:
         "results/benchmarks/calibration/{wkey}.tsv"
+    priority: 10  # before the screens: the simulations that use it wait for it
+    threads: 1
+    resources:
+        mem_mb=1500,
+        runtime=5,  # minutes
+    params:
+        spec=lambda w: canonical_json(CALIBRATION_BY_KEY[w.wkey]),
     shell:
         "{LUCKYAO} calibration --spec {params.spec:q} --out {output:q} 2> {log:q}"

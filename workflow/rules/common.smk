@@ -7,14 +7,33 @@ import sys
 from luckyao.jobs.code_deps import step_sources
 from luckyao.io.datasets import atomic_path
 from luckyao.jobs.live_run import STUDY_JOB, hold_shared
-from luckyao.jobs.resources import (StudyTooLarge, checked_study, commands_memory_bytes, lucky_memory_bytes,
-                                     machine_memory_bytes, mem_mb, reconstructor_memory_bytes,
-                                     simulate_memory_bytes, slopes_memory_bytes, turbulence_memory_bytes)
+from luckyao.jobs.resources import (
+    StudyTooLarge,
+    checked_study,
+    commands_memory_bytes,
+    lucky_memory_bytes,
+    machine_memory_bytes,
+    mem_mb,
+    reconstructor_memory_bytes,
+    simulate_memory_bytes,
+    slopes_memory_bytes,
+    turbulence_memory_bytes,
+)
 from luckyao.io.hashing import canonical_json, sha256
 from luckyao.studyspec.lucky import SIGNAL_KINDS, lucky_settings, sweep_detectors
-from luckyao.studyspec.products import (calibration_key, calibration_spec, commands_key, commands_spec, lgs_twin,
-                                   reconstructor_key, reconstructor_spec, slopes_key, slopes_spec, turbulence_key,
-                                   turbulence_spec)
+from luckyao.studyspec.products import (
+    calibration_key,
+    calibration_spec,
+    commands_key,
+    commands_spec,
+    lgs_twin,
+    reconstructor_key,
+    reconstructor_spec,
+    slopes_key,
+    slopes_spec,
+    turbulence_key,
+    turbulence_spec,
+)
 from luckyao.studyspec.resolved import imaged_targets
 from luckyao.studyspec.schema import ConfigError
 from luckyao.studyspec.study import drawn_cases, plausibility_warnings, unused_cases
@@ -30,8 +49,9 @@ RUN_LOCK = hold_shared()  # this study folder is in use until this Snakemake exi
 GIVEN_MEM_MB = getattr(workflow.global_resources.get("mem_mb"), "value", None)  # a snakemake Resource
 MEMORY_LIMIT_BYTES = max(machine_memory_bytes(), 1e6 * GIVEN_MEM_MB if isinstance(GIVEN_MEM_MB, (int, float)) else 0)
 try:
-    STUDY, CASES = checked_study(config, ".", MEMORY_LIMIT_BYTES,
-                                 workflow.cores if isinstance(workflow.cores, int) else None)
+    STUDY, CASES = checked_study(
+        config, ".", MEMORY_LIMIT_BYTES, workflow.cores if isinstance(workflow.cores, int) else None
+    )
 except ConfigError as err:
     what = "study too large" if isinstance(err, StudyTooLarge) else "invalid study config"
     sys.exit("\n".join(f"luckyao: {what}: {problem}" for problem in str(err).splitlines()))
@@ -40,8 +60,11 @@ for warning in plausibility_warnings(CASES):
 if unused_cases(STUDY):
     # warned, not run: a case no figure shows would cost its simulation (minutes to an hour at
     # paper fidelity) for nothing drawn; `snakemake all_cases` runs every case on purpose
-    print(f"luckyao: warning: no figure shows the cases {', '.join(unused_cases(STUDY))}: they are not run "
-          "(`all_cases` runs every case)", file=sys.stderr)
+    print(
+        f"luckyao: warning: no figure shows the cases {', '.join(unused_cases(STUDY))}: they are not run "
+        "(`all_cases` runs every case)",
+        file=sys.stderr,
+    )
 
 TURBULENCE = {name: turbulence_spec(STUDY, case) for name, case in CASES.items()}
 TURBULENCE_BY_KEY = {turbulence_key(spec): spec for spec in TURBULENCE.values()}
@@ -216,6 +239,7 @@ def simulate_priority(case):
     then the fields) are simulated first, so their long lucky jobs run beside the other
     simulations instead of alone at the end of the study; an LGS twin (config.lgs_twin)
     as early as the no-AO cases that wait for it."""
+
     def work(name):
         return len(lucky_settings(STUDY, CASES, name)["detectors"]) * len(CASES[name]["targets_arcsec"])
 
@@ -230,7 +254,8 @@ def slopes_priority(key):
 def lucky_mem_mb(case):
     """Memory a case's lucky job may hold [MB] at paper fidelity (10 time blocks): its
     estimate as is (``resources.lucky_memory_bytes``: the sweep's 19 detectors, 4.7 GB
-    measured with ``cog`` alone; the partial sums once per registration method), at least 3 GB (a field's replay; its memory-mapped screens not counted)."""
+    measured with ``cog`` alone; the partial sums once per registration method), at least 3 GB (a field's replay; its memory-mapped screens not counted).
+    """
     return mem_mb(lucky_memory_bytes(lucky_settings(STUDY, CASES, case)), 3000, margin=1.0)
 
 

@@ -1,6 +1,9 @@
 # Figures and FITS images are short jobs: on a cluster they run beside Snakemake itself
 # instead of each queueing through sbatch.
-localrules: figure, export, all_cases
+localrules:
+    figure,
+    export,
+    all_cases,
 
 
 rule figure:
@@ -19,15 +22,15 @@ rule figure:
             labels=lambda w, output: figure_report_labels(w.fig, output.data),
         ),
         data="figures/{fig}.nc",
-    params:
-        prefix=lambda w: f"figures/{w.fig}",
-        caption=lambda w: figure_caption_rst(w.fig),  # short, escaped: the report's caption
+    log:
+        "logs/figures/{fig}.log",
     threads: 1
     resources:
         mem_mb=1500,  # at most 1 GB measured
         runtime=5,  # minutes; at most 2 measured
-    log:
-        "logs/figures/{fig}.log",
+    params:
+        prefix=lambda w: f"figures/{w.fig}",
+        caption=lambda w: figure_caption_rst(w.fig),  # short, escaped: the report's caption
     shell:
         "{LUCKYAO} figure --id {wildcards.fig:q} --settings-file {input.settings:q}"
         " --out-prefix {params.prefix:q} {input.lucky:q} 2> {log:q}"
@@ -40,12 +43,12 @@ rule export:
         code=step_sources("luckyao.io.fits"),
     output:
         "fits/{case}.fits",
+    log:
+        "logs/export/{case}.log",
     threads: 1
     resources:
         mem_mb=1000,
         runtime=5,
-    log:
-        "logs/export/{case}.log",
     shell:
         "{LUCKYAO} export {input.lucky:q} --out {output:q} 2> {log:q}"
 

@@ -7,20 +7,20 @@ rule lucky:
         code=step_sources("luckyao.steps.postprocess"),
     output:
         "results/cases/{case}/lucky.nc",
-    params:
-        settings=lambda w: canonical_json(lucky_settings(STUDY, CASES, w.case)),
-        replay=lambda w, input: (["--screens", input.replay[0], "--screens-metadata", input.replay[1]]
-                                 if input.replay else []),
-    threads: 1
-    priority: 10  # a finished simulation's frame cube is post-processed (and, if temporary, deleted) first
-    resources:
-        mem_mb=lambda w: lucky_mem_mb(w.case),
-        runtime=30,  # minutes; paper fidelity: up to 15 measured
     log:
         "logs/lucky/{case}.log",
     benchmark:
         "results/benchmarks/lucky/{case}.tsv"
+    priority: 10  # a finished simulation's frame cube is post-processed (and, if temporary, deleted) first
+    threads: 1
+    resources:
+        mem_mb=lambda w: lucky_mem_mb(w.case),
+        runtime=30,  # minutes; paper fidelity: up to 15 measured
+    params:
+        settings=lambda w: canonical_json(lucky_settings(STUDY, CASES, w.case)),
+        replay=lambda w, input: (
+            ["--screens", input.replay[0], "--screens-metadata", input.replay[1]] if input.replay else []
+        ),
     shell:
         "{LUCKYAO} lucky --settings {params.settings:q} --frames {input.frames:q}"
         " --telemetry {input.telemetry:q} --out {output:q} {params.replay:q} 2> {log:q}"
-

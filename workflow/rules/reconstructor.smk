@@ -4,18 +4,18 @@ rule reconstructor:
         code=step_sources("luckyao.steps.reconstructor"),
     output:
         "results/reconstructors/{rkey}.nc",
-    params:
-        spec=lambda w: canonical_json(RECONSTRUCTOR_BY_KEY[w.rkey]),
-    threads: 1
-    priority: 10  # seconds each, before the screens: every AO simulation waits for them
-    resources:
-        # at most 1.1 GB measured
-        mem_mb=lambda w: mem_mb(reconstructor_memory_bytes(RECONSTRUCTOR_BY_KEY[w.rkey]), 1500),
-        runtime=5,  # minutes; at most 1 measured
     log:
         "logs/reconstructor/{rkey}.log",
     benchmark:
         "results/benchmarks/reconstructor/{rkey}.tsv"
+    priority: 10  # seconds each, before the screens: every AO simulation waits for them
+    threads: 1
+    resources:
+        # at most 1.1 GB measured
+        mem_mb=lambda w: mem_mb(reconstructor_memory_bytes(RECONSTRUCTOR_BY_KEY[w.rkey]), 1500),
+        runtime=5,  # minutes; at most 1 measured
+    params:
+        spec=lambda w: canonical_json(RECONSTRUCTOR_BY_KEY[w.rkey]),
     shell:
         "{LUCKYAO} reconstructor --spec {params.spec:q} --out {output:q} 2> {log:q}"
 
@@ -26,17 +26,17 @@ rule commands:
         code=step_sources("luckyao.steps.reconstructor"),
     output:
         "results/commands/{ckey}.nc",
-    params:
-        spec=lambda w: canonical_json(COMMANDS_BY_KEY[w.ckey]),
-    threads: 1
-    priority: 10  # seconds each, before the screens: every AO simulation waits for them
-    resources:
-        # at most 1.1 GB measured (32x32 WFS)
-        mem_mb=lambda w: mem_mb(commands_memory_bytes(COMMANDS_BY_KEY[w.ckey]), 1500),
-        runtime=5,  # minutes; at most 1 measured
     log:
         "logs/commands/{ckey}.log",
     benchmark:
         "results/benchmarks/commands/{ckey}.tsv"
+    priority: 10  # seconds each, before the screens: every AO simulation waits for them
+    threads: 1
+    resources:
+        # at most 1.1 GB measured (32x32 WFS)
+        mem_mb=lambda w: mem_mb(commands_memory_bytes(COMMANDS_BY_KEY[w.ckey]), 1500),
+        runtime=5,  # minutes; at most 1 measured
+    params:
+        spec=lambda w: canonical_json(COMMANDS_BY_KEY[w.ckey]),
     shell:
         "{LUCKYAO} commands --spec {params.spec:q} --out {output:q} 2> {log:q}"

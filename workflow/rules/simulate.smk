@@ -9,18 +9,18 @@ rule lgs_slopes:
         code=step_sources("luckyao.steps.lgs_slopes"),
     output:
         "results/slopes/{skey}.nc",  # kept, as the screens: a temporary one made again would rerun every case replaying it
-    params:
-        spec=lambda w: canonical_json(SLOPES_BY_KEY[w.skey]),
-        calibration=lambda w, input: ["--calibration", input.calibration] if input.calibration else [],
-    threads: 1
-    priority: lambda w: slopes_priority(w.skey)
-    resources:
-        mem_mb=lambda w: mem_mb(slopes_memory_bytes(CASES[SLOPES_CASES[w.skey][0]]), 3000),
-        runtime=60,  # minutes; paper fidelity: about half an LTAO simulation
     log:
         "logs/slopes/{skey}.log",
     benchmark:
         "results/benchmarks/slopes/{skey}.tsv"
+    priority: lambda w: slopes_priority(w.skey)
+    threads: 1
+    resources:
+        mem_mb=lambda w: mem_mb(slopes_memory_bytes(CASES[SLOPES_CASES[w.skey][0]]), 3000),
+        runtime=60,  # minutes; paper fidelity: about half an LTAO simulation
+    params:
+        spec=lambda w: canonical_json(SLOPES_BY_KEY[w.skey]),
+        calibration=lambda w, input: ["--calibration", input.calibration] if input.calibration else [],
     shell:
         "{LUCKYAO} slopes --spec {params.spec:q} --screens {input.screens:q}"
         " --screens-metadata {input.screens_metadata:q} {params.calibration:q} --out {output:q} 2> {log:q}"
@@ -46,24 +46,26 @@ rule simulate:
     output:
         frames=frames_output("results/cases/{case}/frames.nc"),
         telemetry="results/cases/{case}/telemetry.nc",
-    params:
-        case=lambda w: canonical_json(CASES[w.case]),
-        seed=STUDY["seed"],
-        products=lambda w, input: ((["--reconstructor", input.reconstructor] if input.reconstructor else [])
-                                   + (["--commands", input.commands] if input.commands else [])
-                                   + (["--calibration", input.calibration] if input.calibration else [])
-                                   + (["--slopes", input.slopes] if input.slopes else [])
-                                   + (["--lgs-telemetry", input.lgs_twin] if input.lgs_twin else [])),
-    threads: 1
-    priority: lambda w: simulate_priority(w.case)
-    resources:
-        # paper fidelity: 2-3 GB measured (the screens are memory-mapped)
-        mem_mb=lambda w: mem_mb(simulate_memory_bytes(CASES[w.case]), 4000),
-        runtime=60,  # minutes; paper fidelity: 4-10 per target, up to 30 for a 7-target field case
     log:
         "logs/simulate/{case}.log",
     benchmark:
         "results/benchmarks/simulate/{case}.tsv"
+    priority: lambda w: simulate_priority(w.case)
+    threads: 1
+    resources:
+        # paper fidelity: 2-3 GB measured (the screens are memory-mapped)
+        mem_mb=lambda w: mem_mb(simulate_memory_bytes(CASES[w.case]), 4000),
+        runtime=60,  # minutes; paper fidelity: 4-10 per target, up to 30 for a 7-target field case
+    params:
+        case=lambda w: canonical_json(CASES[w.case]),
+        seed=STUDY["seed"],
+        products=lambda w, input: (
+            (["--reconstructor", input.reconstructor] if input.reconstructor else [])
+            + (["--commands", input.commands] if input.commands else [])
+            + (["--calibration", input.calibration] if input.calibration else [])
+            + (["--slopes", input.slopes] if input.slopes else [])
+            + (["--lgs-telemetry", input.lgs_twin] if input.lgs_twin else [])
+        ),
     shell:
         "{LUCKYAO} simulate --case {params.case:q} --name {wildcards.case:q} --seed {params.seed}"
         " --screens {input.screens:q} --screens-metadata {input.screens_metadata:q}"

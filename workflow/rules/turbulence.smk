@@ -5,16 +5,16 @@ rule turbulence:
     output:
         screens="results/turbulence/{key}.npy",
         metadata="results/turbulence/{key}.nc",
-    params:
-        spec=lambda w: canonical_json(TURBULENCE_BY_KEY[w.key]),
-    threads: 2  # two layers at once (independent draws: the same screens for any number)
-    resources:
-        mem_mb=lambda w: mem_mb(turbulence_memory_bytes(TURBULENCE_BY_KEY[w.key])),  # paper fidelity: 15800
-        runtime=15,  # minutes; paper fidelity: 5 measured
     log:
         "logs/turbulence/{key}.log",
     benchmark:
         "results/benchmarks/turbulence/{key}.tsv"
+    threads: 2  # two layers at once (independent draws: the same screens for any number)
+    resources:
+        mem_mb=lambda w: mem_mb(turbulence_memory_bytes(TURBULENCE_BY_KEY[w.key])),  # paper fidelity: 15800
+        runtime=15,  # minutes; paper fidelity: 5 measured
+    params:
+        spec=lambda w: canonical_json(TURBULENCE_BY_KEY[w.key]),
     shell:
         "{LUCKYAO} turbulence --spec {params.spec:q} --screens {output.screens:q}"
         " --metadata {output.metadata:q} --threads {threads} 2> {log:q}"

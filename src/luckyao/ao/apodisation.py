@@ -41,8 +41,9 @@ class SubapertureRegions:
         pitch_m = self.diameter_m / self.n_across
 
         def index(c):
-            return np.clip(np.floor((np.asarray(c, dtype=float) + self.diameter_m / 2) / pitch_m),
-                           0, self.n_across - 1).astype(np.int64)
+            return np.clip(
+                np.floor((np.asarray(c, dtype=float) + self.diameter_m / 2) / pitch_m), 0, self.n_across - 1
+            ).astype(np.int64)
 
         return index(y_m) * self.n_across + index(x_m)
 
@@ -50,8 +51,7 @@ class SubapertureRegions:
         """Mean square (n_regions,) float64 of ``values`` over the points of each region
         (``labels`` from :meth:`labels`); 0 for a region without points."""
         counts = np.bincount(labels, minlength=self.n_regions)
-        power = np.bincount(labels, weights=np.square(np.asarray(values, dtype=np.float64)),
-                            minlength=self.n_regions)
+        power = np.bincount(labels, weights=np.square(np.asarray(values, dtype=np.float64)), minlength=self.n_regions)
         return np.divide(power, counts, out=np.zeros(self.n_regions), where=counts > 0)
 
 
@@ -72,7 +72,7 @@ class Apodiser:
         """The ``n_blocked`` regions (of those holding samples) with the largest mean square
         (n_regions,); ties go to the lower region number."""
         ranked = self.present[np.argsort(-region_mean_square[self.present], kind="stable")]
-        return ranked[:self.n_blocked]
+        return ranked[: self.n_blocked]
 
     def open_samples(self, region_mean_square: np.ndarray) -> np.ndarray:
         """Transmission (n_samples,) float32, 1 open and 0 blocked, for a ranking (n_regions,)."""

@@ -47,10 +47,17 @@ def ground_layers(prior: TurbulencePrior, ground_max_height_m: float | None = No
     return layers
 
 
-def command_matrix(prior: TurbulencePrior, geometry: SlopeGeometry, noise_rms_rad: float,
-                   dm: DeformableMirror, mode: str, direction_rad=(0.0, 0.0),
-                   ground_max_height_m: float | None = None, fit_pitch_m: float | None = None,
-                   cholesky_lower: np.ndarray | None = None) -> np.ndarray:
+def command_matrix(
+    prior: TurbulencePrior,
+    geometry: SlopeGeometry,
+    noise_rms_rad: float,
+    dm: DeformableMirror,
+    mode: str,
+    direction_rad=(0.0, 0.0),
+    ground_max_height_m: float | None = None,
+    fit_pitch_m: float | None = None,
+    cholesky_lower: np.ndarray | None = None,
+) -> np.ndarray:
     """``M`` (n_act, n_slopes) float32 [m / rad]: tilt-removed slopes -> DM commands.
 
     ``mode`` is ``"ltao"`` (all layers, along ``direction_rad`` (2,) [rad]) or
@@ -77,8 +84,7 @@ def command_matrix(prior: TurbulencePrior, geometry: SlopeGeometry, noise_rms_ra
     return apply_inverse(cholesky_lower, dm.fit_matrix(points) @ cross).astype(np.float32)
 
 
-def dm_slopes_matrix(dm: DeformableMirror, subapertures, n_beacons: int,
-                     n_edge: int = 8) -> np.ndarray:
+def dm_slopes_matrix(dm: DeformableMirror, subapertures, n_beacons: int, n_edge: int = 8) -> np.ndarray:
     """``D`` (n_slopes, n_act) float32 [rad / m]: tilt-removed slopes of every
     beacon's WFS for DM commands [m of optical path].
 

@@ -35,8 +35,10 @@ class DelayedDm:
 
     def __init__(self, surface: GridSurface, exposure_steps: int, delay_steps: int, lookahead_steps: int):
         if delay_steps < exposure_steps:
-            raise ValueError(f"a command cannot be applied before its exposure ends: delay_steps "
-                             f"{delay_steps} < exposure_steps {exposure_steps}")
+            raise ValueError(
+                f"a command cannot be applied before its exposure ends: delay_steps "
+                f"{delay_steps} < exposure_steps {exposure_steps}"
+            )
         self.surface = surface
         self.exposure_steps, self.delay_steps, self.lookahead_steps = exposure_steps, delay_steps, lookahead_steps
         self.n_actuators = int(surface.valid.sum())
@@ -87,8 +89,15 @@ class OpenLoopCorrection:
     [rad / m]; the other arguments are the :class:`DelayedDm`'s.
     """
 
-    def __init__(self, command_matrix: np.ndarray, dm_slopes: np.ndarray, surface: GridSurface,
-                 exposure_steps: int, delay_steps: int, lookahead_steps: int):
+    def __init__(
+        self,
+        command_matrix: np.ndarray,
+        dm_slopes: np.ndarray,
+        surface: GridSurface,
+        exposure_steps: int,
+        delay_steps: int,
+        lookahead_steps: int,
+    ):
         self.dm = DelayedDm(surface, exposure_steps, delay_steps, lookahead_steps)
         if command_matrix.shape[0] != self.dm.n_actuators or dm_slopes.shape != command_matrix.shape[::-1]:
             raise ValueError("the command matrix does not match this DM or WFS: rebuild it")

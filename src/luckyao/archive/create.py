@@ -28,9 +28,19 @@ import yaml
 from ..io.datasets import atomic_path, code_version, open_dataset, require_finite_lucky
 from ..io.hashing import canonical_json, sha256
 from ..studyspec.lucky import lucky_settings
-from ..studyspec.products import (calibration_key, calibration_spec, commands_key, commands_spec, lgs_twin,
-                                  reconstructor_key, reconstructor_spec, slopes_key, slopes_spec, turbulence_key,
-                                  turbulence_spec)
+from ..studyspec.products import (
+    calibration_key,
+    calibration_spec,
+    commands_key,
+    commands_spec,
+    lgs_twin,
+    reconstructor_key,
+    reconstructor_spec,
+    slopes_key,
+    slopes_spec,
+    turbulence_key,
+    turbulence_spec,
+)
 from ..studyspec.study import drawn_cases, load_study
 from ..studyspec.sweeps import expand_sweeps
 from ..version import __version__
@@ -75,9 +85,11 @@ def runtime_packages() -> dict[str, str]:
 
 def requirements_lock() -> str:
     """``requirements.lock`` text: ``name==version`` of every runtime package of this environment."""
-    header = (f"# luckyao's runtime dependencies, exact versions (Python {platform.python_version()}, "
-              f"{platform.system()} {platform.machine()}); made by `luckyao lock`.\n"
-              "# Environment: pip install -r requirements.lock && pip install --no-deps -e .\n")
+    header = (
+        f"# luckyao's runtime dependencies, exact versions (Python {platform.python_version()}, "
+        f"{platform.system()} {platform.machine()}); made by `luckyao lock`.\n"
+        "# Environment: pip install -r requirements.lock && pip install --no-deps -e .\n"
+    )
     return header + "".join(f"{name}=={version}\n" for name, version in runtime_packages().items())
 
 
@@ -89,19 +101,28 @@ def parse_lock(text: str) -> dict[str, str]:
 
 def package_differences(archived: dict[str, str], here: dict[str, str]) -> list[str]:
     """One line per package whose version differs between two name -> version maps."""
-    return [f"{name} {archived.get(name, 'absent')} archived, {here.get(name, 'absent')} here"
-            for name in sorted(set(archived) | set(here), key=str.lower) if archived.get(name) != here.get(name)]
+    return [
+        f"{name} {archived.get(name, 'absent')} archived, {here.get(name, 'absent')} here"
+        for name in sorted(set(archived) | set(here), key=str.lower)
+        if archived.get(name) != here.get(name)
+    ]
 
 
 def git_state(repo: Path = REPO) -> dict:
     """Commit of the checkout, its uncommitted changes to tracked files and its untracked
     files (``None``, ``""``, ``[]`` without git)."""
+
     def git(*args):
-        return subprocess.run(["git", "-C", str(repo), *args], capture_output=True, text=True, timeout=30,
-                              check=True).stdout
+        return subprocess.run(
+            ["git", "-C", str(repo), *args], capture_output=True, text=True, timeout=30, check=True
+        ).stdout
+
     try:
-        return {"commit": git("rev-parse", "HEAD").strip(), "diff": git("diff", "HEAD"),
-                "untracked": git("ls-files", "--others", "--exclude-standard").split()}
+        return {
+            "commit": git("rev-parse", "HEAD").strip(),
+            "diff": git("diff", "HEAD"),
+            "untracked": git("ls-files", "--others", "--exclude-standard").split(),
+        }
     except (OSError, subprocess.SubprocessError):
         return {"commit": None, "diff": "", "untracked": []}
 
@@ -125,10 +146,12 @@ def case_jobs(study: dict, cases: dict, case: str) -> list[str]:
     jobs = [f"turbulence/{turbulence_key(turbulence_spec(study, cases[case]))}"]
     for name in simulated:
         config = cases[name]
-        for step, spec, key in (("reconstructor", reconstructor_spec(config), reconstructor_key),
-                                ("calibration", calibration_spec(study, config), calibration_key),
-                                ("commands", commands_spec(config), commands_key),
-                                ("slopes", slopes_spec(study, config), slopes_key)):
+        for step, spec, key in (
+            ("reconstructor", reconstructor_spec(config), reconstructor_key),
+            ("calibration", calibration_spec(study, config), calibration_key),
+            ("commands", commands_spec(config), commands_key),
+            ("slopes", slopes_spec(study, config), slopes_key),
+        ):
             if spec is not None and (job := f"{step}/{key(spec)}") not in jobs:
                 jobs.append(job)
     return jobs + [f"simulate/{name}" for name in simulated] + [f"lucky/{case}"]
@@ -158,8 +181,9 @@ def _stale(path: Path, member: str, study: dict, cases: dict) -> list[str]:
 
 def checksum_list(members: dict[str, bytes]) -> bytes:
     """``SHA256SUMS`` text (``sha256sum`` format) of every member but itself."""
-    return "".join(f"{hashlib.sha256(data).hexdigest()}  {name}\n"
-                   for name, data in sorted(members.items()) if name != CHECKSUMS).encode()
+    return "".join(
+        f"{hashlib.sha256(data).hexdigest()}  {name}\n" for name, data in sorted(members.items()) if name != CHECKSUMS
+    ).encode()
 
 
 def write_members(path, members: dict[str, bytes]) -> None:
@@ -197,22 +221,40 @@ def archive(study_dir=".", configfiles=(), out=None, echo=print) -> Path:
     files = [f"figures/{fig}.{ext}" for fig in study["figures"] for ext in FIGURE_EXTENSIONS]
     missing = [name for name in files if not (study_dir / name).is_file()]
     if missing:
-        raise ArchiveError("\n".join(f"{name}: missing; finish the study (snakemake) before archiving"
-                                     for name in missing))
+        raise ArchiveError(
+            "\n".join(f"{name}: missing; finish the study (snakemake) before archiving" for name in missing)
+        )
     archived_cases = [c for c in cases if (study_dir / "results" / "cases" / c / "lucky.nc").is_file()]
     for case in archived_cases:
-        files += [f"results/cases/{case}/{name}" for name in CASE_FILES
-                  if (study_dir / "results" / "cases" / case / name).is_file()]
-        files += [f"results/benchmarks/{job}.tsv" for job in case_jobs(study, cases, case)
-                  if (study_dir / "results" / "benchmarks" / f"{job}.tsv").is_file()]
+        files += [
+            f"results/cases/{case}/{name}"
+            for name in CASE_FILES
+            if (study_dir / "results" / "cases" / case / name).is_file()
+        ]
+        files += [
+            f"results/benchmarks/{job}.tsv"
+            for job in case_jobs(study, cases, case)
+            if (study_dir / "results" / "benchmarks" / f"{job}.tsv").is_file()
+        ]
     files = list(dict.fromkeys(files))  # shared jobs once
     stale = [p for name in files if name.endswith(".nc") for p in _stale(study_dir / name, name, study, cases)]
     if stale:
-        raise ArchiveError("\n".join(stale + [f"archive with the config files the study ran with "
-                                              f"(given: {' + '.join(map(str, sources))}) or rerun it"]))
+        raise ArchiveError(
+            "\n".join(
+                stale
+                + [
+                    f"archive with the config files the study ran with "
+                    f"(given: {' + '.join(map(str, sources))}) or rerun it"
+                ]
+            )
+        )
     drawn = drawn_cases(expand_sweeps(study))
-    absent = [f"case '{case}': results/cases/{case}/{name} missing; rerun the study (snakemake) before archiving"
-              for case in drawn for name in CASE_FILES if not (study_dir / "results" / "cases" / case / name).is_file()]
+    absent = [
+        f"case '{case}': results/cases/{case}/{name} missing; rerun the study (snakemake) before archiving"
+        for case in drawn
+        for name in CASE_FILES
+        if not (study_dir / "results" / "cases" / case / name).is_file()
+    ]
     if absent:  # a study is never archived with a case its figures show missing (after the config's check:
         # results of another config name their cause better)
         raise ArchiveError("\n".join(absent))
@@ -251,8 +293,11 @@ def archive(study_dir=".", configfiles=(), out=None, echo=print) -> Path:
         "cpu": _cpu_model(),
         "packages": parse_lock(lock),
     }
-    members = {"MANIFEST.json": (json.dumps(manifest, indent=1) + "\n").encode(),
-               "config.yaml": config_text.encode(), "requirements.lock": lock.encode()}
+    members = {
+        "MANIFEST.json": (json.dumps(manifest, indent=1) + "\n").encode(),
+        "config.yaml": config_text.encode(),
+        "requirements.lock": lock.encode(),
+    }
     if git["diff"]:
         members["code.diff"] = git["diff"].encode()
     members |= {name: (study_dir / name).read_bytes() for name in files}
@@ -261,8 +306,10 @@ def archive(study_dir=".", configfiles=(), out=None, echo=print) -> Path:
     path = Path(out) if out else study_dir / "archives" / f"luckyao-{manifest['config_sha256'][:12]}-{stamp}.tar"
     write_members(path, members)
     size_mb = path.stat().st_size / 1e6
-    echo(f"archived {len(members)} files of {len(archived_cases)} cases and {len(study['figures'])} figures "
-         f"({size_mb:.1f} MB) in {time.perf_counter() - start:.1f} s: {path}")
+    echo(
+        f"archived {len(members)} files of {len(archived_cases)} cases and {len(study['figures'])} figures "
+        f"({size_mb:.1f} MB) in {time.perf_counter() - start:.1f} s: {path}"
+    )
     if git["diff"]:
         echo("warning: the checkout has uncommitted changes (archived as code.diff over the commit)")
     if git["untracked"]:

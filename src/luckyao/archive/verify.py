@@ -8,7 +8,8 @@ benchmark table more than ``BENCHMARK_LIMIT_BYTES``, the small members together 
 than ``HELD_LIMIT_BYTES``, more than ``MEMBER_COUNT_LIMIT`` members, and tar's own
 extended headers together more than ``HEADER_LIMIT_BYTES``). Only regular files (and
 folders) are read: a link or any other kind of member is refused, as is a name
-archived twice (a tar file may hold two copies; which one is "the" member?). Every checksum is checked against ``SHA256SUMS``;
+archived twice (a tar file may hold two copies; which one is "the" member?). Every checksum is checked against
+``SHA256SUMS``;
 warnings follow when this environment or code differs from the archived one;
 then one case (by default the one whose jobs took least time when archived), or
 every case, is rerun with Snakemake from the archived config, and every
@@ -40,12 +41,22 @@ from pathlib import Path
 import numpy as np
 import xarray as xr
 
-from .create import (CASE_FILES, CHECKSUMS, FORMAT, REPO, REQUIRED, ArchiveError, case_jobs, package_differences,
-                     parse_lock, runtime_packages)
 from ..clock import FrameClock
+from ..io.datasets import code_version
 from ..studyspec.study import validate_study
 from ..studyspec.yamlfile import read_config_text
-from ..io.datasets import code_version
+from .create import (
+    CASE_FILES,
+    CHECKSUMS,
+    FORMAT,
+    REPO,
+    REQUIRED,
+    ArchiveError,
+    case_jobs,
+    package_differences,
+    parse_lock,
+    runtime_packages,
+)
 
 CHUNK_BYTES = 1 << 20
 MEMBER_LIMIT_BYTES = 2 << 30
@@ -74,14 +85,22 @@ class _BoundedTarInfo(tarfile.TarInfo):
 
     def _proc_member(self, tar):
         if self.type == tarfile.GNUTYPE_SPARSE:
-            raise ArchiveError(f"archive '{tar.name}': member {self.name} is a sparse file; verify reads only "
-                               "regular files")
-        if self.type in (tarfile.GNUTYPE_LONGNAME, tarfile.GNUTYPE_LONGLINK, tarfile.XHDTYPE, tarfile.XGLTYPE,
-                         tarfile.SOLARIS_XHDTYPE):
+            raise ArchiveError(
+                f"archive '{tar.name}': member {self.name} is a sparse file; verify reads only regular files"
+            )
+        if self.type in (
+            tarfile.GNUTYPE_LONGNAME,
+            tarfile.GNUTYPE_LONGLINK,
+            tarfile.XHDTYPE,
+            tarfile.XGLTYPE,
+            tarfile.SOLARIS_XHDTYPE,
+        ):
             tar.luckyao_header_bytes = getattr(tar, "luckyao_header_bytes", 0) + self.size
             if tar.luckyao_header_bytes > HEADER_LIMIT_BYTES:
-                raise ArchiveError(f"archive '{tar.name}': its extended tar headers hold more than "
-                                   f"{HEADER_LIMIT_BYTES:,} bytes together (names, pax records); not read")
+                raise ArchiveError(
+                    f"archive '{tar.name}': its extended tar headers hold more than "
+                    f"{HEADER_LIMIT_BYTES:,} bytes together (names, pax records); not read"
+                )
         return super()._proc_member(tar)
 
 
@@ -104,15 +123,24 @@ def _members(path):
                 continue
             name = info.name.partition("/")[2]
             if not info.isreg():
-                kind = ("a symbolic link" if info.issym() else "a hard link" if info.islnk() else
-                        "a device or FIFO, not a file")
-                raise ArchiveError(f"archive '{path}': member {name or info.name} is {kind}"
-                                   f"{' to ' + repr(info.linkname) if info.issym() or info.islnk() else ''}; "
-                                   "an archive holds regular files only")
+                kind = (
+                    "a symbolic link"
+                    if info.issym()
+                    else "a hard link"
+                    if info.islnk()
+                    else "a device or FIFO, not a file"
+                )
+                raise ArchiveError(
+                    f"archive '{path}': member {name or info.name} is {kind}"
+                    f"{' to ' + repr(info.linkname) if info.issym() or info.islnk() else ''}; "
+                    "an archive holds regular files only"
+                )
             limit = _held_limit(name) if _held(name) else MEMBER_LIMIT_BYTES
             if info.size > limit:
-                raise ArchiveError(f"archive '{path}': member {name} claims {info.size:,} bytes, more than "
-                                   f"verify reads ({limit:,}); not read")
+                raise ArchiveError(
+                    f"archive '{path}': member {name} claims {info.size:,} bytes, more than "
+                    f"verify reads ({limit:,}); not read"
+                )
             stream = tar.extractfile(info)
             yield name, iter(lambda stream=stream: stream.read(CHUNK_BYTES), b"")
 
@@ -124,16 +152,19 @@ def scan_members(path) -> tuple[dict[str, str], dict[str, bytes]]:
     try:
         for name, chunks in _members(path):
             if name in digests:
-                raise ArchiveError(f"archive '{path}': member {name} is archived twice; an archive holds each "
-                                   "name once")
+                raise ArchiveError(
+                    f"archive '{path}': member {name} is archived twice; an archive holds each name once"
+                )
             digest, data = hashlib.sha256(), bytearray()
             for chunk in chunks:
                 digest.update(chunk)
                 if _held(name):
                     data += chunk
                     if held_bytes + len(data) > HELD_LIMIT_BYTES:
-                        raise ArchiveError(f"archive '{path}': its config, lock, manifest and benchmark members "
-                                           f"hold more than {HELD_LIMIT_BYTES:,} bytes together; not read further")
+                        raise ArchiveError(
+                            f"archive '{path}': its config, lock, manifest and benchmark members "
+                            f"hold more than {HELD_LIMIT_BYTES:,} bytes together; not read further"
+                        )
             digests[name] = digest.hexdigest()
             if _held(name):
                 held[name] = bytes(data)
@@ -174,8 +205,11 @@ def check_checksums(digests: dict[str, str], held: dict[str, bytes]) -> list[str
             problems.append(f"{name}: missing from the archive (listed in {CHECKSUMS})")
         elif digests[name] != digest:
             problems.append(f"{name}: checksum differs from {CHECKSUMS} (changed after archiving)")
-    problems += [f"{name}: not in {CHECKSUMS} (added after archiving)"
-                 for name in digests if name not in listed and name != CHECKSUMS]
+    problems += [
+        f"{name}: not in {CHECKSUMS} (added after archiving)"
+        for name in digests
+        if name not in listed and name != CHECKSUMS
+    ]
     return problems + [f"{name}: missing from the archive" for name in REQUIRED if name not in digests]
 
 
@@ -202,9 +236,16 @@ def cheapest_case(names, held: dict[str, bytes], study: dict, cases: dict) -> tu
 
     def work(c):
         config = cases[c]
-        return (FrameClock.from_config(config).n_steps,
-                len(config["targets_arcsec"]), config["lgs"]["enabled"], config["ao"]["mode"] != "none",
-                config["wfs"]["n_subapertures"], config["camera"]["n_pixels"], c)
+        return (
+            FrameClock.from_config(config).n_steps,
+            len(config["targets_arcsec"]),
+            config["lgs"]["enabled"],
+            config["ao"]["mode"] != "none",
+            config["wfs"]["n_subapertures"],
+            config["camera"]["n_pixels"],
+            c,
+        )
+
     return min(archived, key=work), None
 
 
@@ -213,10 +254,16 @@ def compare_variables(fresh: xr.Dataset, archived: xr.Dataset, rtol: float, atol
     ``config_sha256`` and ``seed`` attributes: identical, within ``atol + rtol |archived|``
     (with the largest absolute and relative differences), or different; a variable of
     the rerun only (newer code) agrees, one missing from the rerun does not."""
-    rows = [(f"attribute {key}", fresh.attrs.get(key) == archived.attrs.get(key),
-             "identical" if fresh.attrs.get(key) == archived.attrs.get(key) else
-             f"{fresh.attrs.get(key)} in the rerun, {archived.attrs.get(key)} archived")
-            for key in ("config_sha256", "seed")]
+    rows = [
+        (
+            f"attribute {key}",
+            fresh.attrs.get(key) == archived.attrs.get(key),
+            "identical"
+            if fresh.attrs.get(key) == archived.attrs.get(key)
+            else f"{fresh.attrs.get(key)} in the rerun, {archived.attrs.get(key)} archived",
+        )
+        for key in ("config_sha256", "seed")
+    ]
     for name in sorted(set(fresh.variables) | set(archived.variables), key=str):
         if name not in archived.variables:  # newer code adds it: every archived number is still compared
             rows.append((name, True, "new in the rerun, not archived (not compared)"))
@@ -239,10 +286,15 @@ def compare_variables(fresh: xr.Dataset, archived: xr.Dataset, rtol: float, atol
                 diff = np.where(np.isnan(diff), np.inf, diff)
                 relative = np.where(diff > 0, diff / np.abs(b), 0.0)
             agrees = bool(np.all(diff <= atol + rtol * np.abs(b)))
-            rows.append((name, agrees, f"max abs diff {diff.max():.3g}, max rel diff {np.nanmax(relative):.3g}: "
-                                       + (f"within rtol={rtol:g}, atol={atol:g}" if agrees else "DIFFERS")))
+            rows.append(
+                (
+                    name,
+                    agrees,
+                    f"max abs diff {diff.max():.3g}, max rel diff {np.nanmax(relative):.3g}: "
+                    + (f"within rtol={rtol:g}, atol={atol:g}" if agrees else "DIFFERS"),
+                )
+            )
     return rows
-
 
 
 def check_archive(path, echo=print) -> tuple[dict, set[str], dict[str, bytes]] | None:
@@ -268,14 +320,17 @@ def check_archive(path, echo=print) -> tuple[dict, set[str], dict[str, bytes]] |
     if not differences:
         echo(f"environment: the archived versions of all {len(here)} runtime packages and Python")
     if manifest["code_version"] != code_version():
-        echo(f"warning: archived by code {manifest['code_version']}; this code is {code_version()} "
-             f"(to rerun the archived code: git checkout {manifest['git_commit']}"
-             f"{', then git apply code.diff' if manifest['git_dirty'] else ''})")
+        echo(
+            f"warning: archived by code {manifest['code_version']}; this code is {code_version()} "
+            f"(to rerun the archived code: git checkout {manifest['git_commit']}"
+            f"{', then git apply code.diff' if manifest['git_dirty'] else ''})"
+        )
     return manifest, set(digests), held
 
 
-def compare_case(path, case: str, names: set[str], workdir: Path, rtol: float, atol: float,
-                 echo=print) -> tuple[list[str], list[str]]:
+def compare_case(
+    path, case: str, names: set[str], workdir: Path, rtol: float, atol: float, echo=print
+) -> tuple[list[str], list[str]]:
     """Every variable of a rerun case's files against the archived ones, one line each:
     (differences, unreadable files), each line naming the member."""
     differences, unreadable = [], []
@@ -293,8 +348,10 @@ def compare_case(path, case: str, names: set[str], workdir: Path, rtol: float, a
             unreadable.append(f"{member}: unreadable, not a netCDF file the rerun can be compared with ({err})")
             continue
         if fresh.attrs.get("code_version") != archived.attrs.get("code_version"):
-            echo(f"{member}: made by code {archived.attrs.get('code_version')}, rerun by "
-                 f"{fresh.attrs.get('code_version')}")
+            echo(
+                f"{member}: made by code {archived.attrs.get('code_version')}, rerun by "
+                f"{fresh.attrs.get('code_version')}"
+            )
         for variable, agrees, how in compare_variables(fresh, archived, rtol, atol):
             echo(f"{member}: {variable}: {how}")
             if not agrees:
@@ -302,15 +359,26 @@ def compare_case(path, case: str, names: set[str], workdir: Path, rtol: float, a
     return differences, unreadable
 
 
-def rerun_cases(held: dict[str, bytes], rerun: list[str], workdir: Path, snakefile: Path, cores: int,
-                echo=print) -> bool:
+def rerun_cases(
+    held: dict[str, bytes], rerun: list[str], workdir: Path, snakefile: Path, cores: int, echo=print
+) -> bool:
     """Snakemake remakes the ``lucky.nc`` of the cases ``rerun`` from the archived config in
     ``workdir``; False (with the log's tail) when it fails."""
     (workdir / "config").mkdir(parents=True, exist_ok=True)
     (workdir / "config" / "config.yaml").write_bytes(held["config.yaml"])
     targets = [f"results/cases/{case}/lucky.nc" for case in rerun]
-    command = [sys.executable, "-m", "snakemake", "-s", str(snakefile), "-d", str(workdir), "--cores", str(cores),
-               *targets]
+    command = [
+        sys.executable,
+        "-m",
+        "snakemake",
+        "-s",
+        str(snakefile),
+        "-d",
+        str(workdir),
+        "--cores",
+        str(cores),
+        *targets,
+    ]
     start = time.perf_counter()
     log = workdir / "verify-snakemake.log"
     with open(log, "w") as stream:
@@ -332,8 +400,10 @@ def claim_workdir(workdir: Path) -> None:
     if workdir.is_dir() and not (workdir / WORKDIR_MARKER).is_file() and any(workdir.iterdir()):
         study = [p for p in ("Snakefile", "config", "results", ".snakemake") if (workdir / p).exists()]
         what = f"a study folder (it has {', '.join(study)})" if study else "not empty"
-        raise ArchiveError(f"--workdir '{workdir}' is {what}: the rerun writes config/config.yaml and results/ "
-                           "there; give a new or empty folder (or one an earlier verify made)")
+        raise ArchiveError(
+            f"--workdir '{workdir}' is {what}: the rerun writes config/config.yaml and results/ "
+            "there; give a new or empty folder (or one an earlier verify made)"
+        )
     workdir.mkdir(parents=True, exist_ok=True)
     (workdir / WORKDIR_MARKER).write_text("a folder luckyao verify made for a rerun; verify may reuse it\n")
 
@@ -342,8 +412,9 @@ def _cases(names: list[str]) -> str:
     return f"case '{names[0]}'" if len(names) == 1 else f"cases {', '.join(names)}"
 
 
-def verify(path, case=None, workdir=None, rtol=0.0, atol=0.0, cores=2, snakefile=None, rerun=True,
-           all_cases=False, echo=print) -> bool:
+def verify(
+    path, case=None, workdir=None, rtol=0.0, atol=0.0, cores=2, snakefile=None, rerun=True, all_cases=False, echo=print
+) -> bool:
     """Check the archive ``path`` and rerun cases of it; True when everything agrees.
 
     Checksums first (a damaged archive is not rerun), with warnings when this
@@ -381,8 +452,11 @@ def verify(path, case=None, workdir=None, rtol=0.0, atol=0.0, cores=2, snakefile
     claim_workdir(workdir)
     keep = False  # a failed or differing rerun is kept for inspection
     try:
-        echo(f"rerun: {_cases(chosen)}" + (f" (its jobs took {seconds:.0f} s when archived)" if seconds else "")
-             + f" in {workdir}")
+        echo(
+            f"rerun: {_cases(chosen)}"
+            + (f" (its jobs took {seconds:.0f} s when archived)" if seconds else "")
+            + f" in {workdir}"
+        )
         if not rerun_cases(held, chosen, workdir, snakefile, cores, echo):
             keep = True
             return False
@@ -395,9 +469,12 @@ def verify(path, case=None, workdir=None, rtol=0.0, atol=0.0, cores=2, snakefile
             echo(f"FAILED: {failure}")
         if unreadable or differences:
             keep = bool(differences)
-            echo(f"verify: FAILED, the rerun of {_cases(chosen)} differs from the archive in {len(differences)} "
-                 f"variables" + (f", {len(unreadable)} archived files unreadable" if unreadable else "")
-                 + (f" (rerun kept in {workdir})" if keep else ""))
+            echo(
+                f"verify: FAILED, the rerun of {_cases(chosen)} differs from the archive in {len(differences)} "
+                f"variables"
+                + (f", {len(unreadable)} archived files unreadable" if unreadable else "")
+                + (f" (rerun kept in {workdir})" if keep else "")
+            )
             return False
         echo(f"verify: OK, checksums and the rerun of {_cases(chosen)} agree with archive '{path}'")
         return True

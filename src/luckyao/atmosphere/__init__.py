@@ -3,7 +3,14 @@
 from ..exports import lazy_exports
 
 EXPORTS = {
-    "statistics": ("Layer", "R0Schedule", "von_karman_psd", "von_karman_covariance", "von_karman_structure_function", "r0_at_wavelength"),
+    "statistics": (
+        "Layer",
+        "R0Schedule",
+        "von_karman_psd",
+        "von_karman_covariance",
+        "von_karman_structure_function",
+        "r0_at_wavelength",
+    ),
     "screens": ("StripSpec", "strip_spec", "strip_screen", "ScreenSet"),
 }
 """Public objects, by module (imported on first use: :mod:`luckyao.exports`)."""

@@ -45,8 +45,15 @@ class StripSpec:
         return (self.skew * np.asarray(i, dtype=np.int64)) // self.n_major
 
 
-def strip_spec(layer: Layer, time_step_s: float, n_steps: int, dx_m: float,
-               radius_m: float, min_along_m: float, min_across_m: float) -> StripSpec:
+def strip_spec(
+    layer: Layer,
+    time_step_s: float,
+    n_steps: int,
+    dx_m: float,
+    radius_m: float,
+    min_along_m: float,
+    min_across_m: float,
+) -> StripSpec:
     """Strip that holds every footprint within ``radius_m`` of the axis for ``n_steps``.
 
     The screen moves by ``v dt`` per step, so a point fixed on the sky samples
@@ -62,17 +69,23 @@ def strip_spec(layer: Layer, time_step_s: float, n_steps: int, dx_m: float,
     slope, cos = e_minor / e_major, abs(e_major)
     travel_m = layer.wind_speed_m_s * time_step_s * n_steps
     reach_m = radius_m + 2 * dx_m
-    n_major = scipy.fft.next_fast_len(int(np.ceil(max((abs(e_major) * travel_m + 2 * reach_m) / dx_m + 2,
-                                                       min_along_m * cos / dx_m))))
-    n_minor = scipy.fft.next_fast_len(int(np.ceil(max(2 * reach_m / (cos * dx_m) + 6,
-                                                       min_across_m / (cos * dx_m)))))
+    n_major = scipy.fft.next_fast_len(
+        int(np.ceil(max((abs(e_major) * travel_m + 2 * reach_m) / dx_m + 2, min_along_m * cos / dx_m)))
+    )
+    n_minor = scipy.fft.next_fast_len(int(np.ceil(max(2 * reach_m / (cos * dx_m) + 6, min_across_m / (cos * dx_m)))))
     origin_major = min(0.0, -e_major * travel_m) - reach_m
     # the band's centre line, minor = slope * major, falls near the middle sample of every line
     origin_minor = slope * origin_major - (n_minor - 1) * dx_m / 2
     step_m = layer.wind_speed_m_s * time_step_s
-    return StripSpec(dx_m=dx_m, n_major=n_major, n_minor=n_minor, major_axis=major,
-                     skew=int(round(n_major * slope)), origin_m=(origin_major, origin_minor),
-                     step_samples=(step_m * e_major / dx_m, step_m * e_minor / dx_m))
+    return StripSpec(
+        dx_m=dx_m,
+        n_major=n_major,
+        n_minor=n_minor,
+        major_axis=major,
+        skew=int(round(n_major * slope)),
+        origin_m=(origin_major, origin_minor),
+        step_samples=(step_m * e_major / dx_m, step_m * e_minor / dx_m),
+    )
 
 
 def _across_rows(dfy: float, refined: int, split: int, subharmonic_levels: int):
@@ -87,8 +100,14 @@ def _across_rows(dfy: float, refined: int, split: int, subharmonic_levels: int):
     return np.array(rows).T
 
 
-def strip_screen(spec: StripSpec, outer_scale_m: float, rng: np.random.Generator,
-                 refined_rows: int = 2, row_split: int = 3, subharmonic_levels: int = 3) -> np.ndarray:
+def strip_screen(
+    spec: StripSpec,
+    outer_scale_m: float,
+    rng: np.random.Generator,
+    refined_rows: int = 2,
+    row_split: int = 3,
+    subharmonic_levels: int = 3,
+) -> np.ndarray:
     """Von Karman phase strip [rad at 500 nm for r0 = 1 m], float32 (n_major, n_minor).
 
     FFT method (McGlamery 1976), ``Re sum_f c_f sqrt(Phi(f) df) exp(2 pi i f.r)``
@@ -193,4 +212,4 @@ class ScreenSet:
     def screen(self, layer: int) -> np.ndarray:
         s = self.specs[layer]
         start = self.starts[layer]
-        return self.flat[start:start + s.n_major * s.n_minor].reshape(s.n_major, s.n_minor)
+        return self.flat[start : start + s.n_major * s.n_minor].reshape(s.n_major, s.n_minor)

@@ -48,8 +48,13 @@ def von_karman_covariance(r_m, r0_m, outer_scale_m):
     limit ``x^(5/6) K_(5/6)(x) -> 2^(-1/6) Gamma(5/6)`` is used.
     """
     r = np.asarray(r_m, dtype=float)
-    coefficient = ((outer_scale_m / r0_m) ** (5 / 3) * 2 ** (-5 / 6) * gamma(11 / 6)
-                   / np.pi ** (8 / 3) * (24 / 5 * gamma(6 / 5)) ** (5 / 6))
+    coefficient = (
+        (outer_scale_m / r0_m) ** (5 / 3)
+        * 2 ** (-5 / 6)
+        * gamma(11 / 6)
+        / np.pi ** (8 / 3)
+        * (24 / 5 * gamma(6 / 5)) ** (5 / 6)
+    )
     x = 2 * np.pi * r / outer_scale_m
     at_zero = coefficient * 2 ** (-1 / 6) * gamma(5 / 6)
     with np.errstate(invalid="ignore", divide="ignore"):

@@ -2,7 +2,8 @@
 
 ``draw_figure`` builds the figure's dataset from the cases' ``lucky.nc`` files,
 writes it as ``<prefix>.nc`` and draws ``<prefix>.pdf`` and ``<prefix>.png``
-from that dataset alone, and ``<prefix>.html``, the PNG in a page (the report's view). Each kind is a pair (data, drawing) in :data:`FIGURE_KINDS`;
+from that dataset alone, and ``<prefix>.html``, the PNG in a page (the report's view). Each kind is a pair (data,
+drawing) in :data:`FIGURE_KINDS`;
 the drawings use matplotlib's object API (no pyplot, no backend chosen at import) and
 one colour-blind-safe palette (``style``).
 
@@ -24,14 +25,27 @@ from ..io.datasets import open_dataset, provenance, require_finite_lucky, write_
 from ..io.hashing import sha256
 from .diameter import draw_quality_vs_diameter, quality_vs_diameter_data
 from .gallery import draw_psf_gallery, psf_gallery_data
-from .quality import (comparisons_data, draw_comparisons, draw_quality_vs_distance, draw_quality_vs_fraction,
-                      draw_quality_vs_parameter, quality_vs_distance_data, quality_vs_fraction_data,
-                      quality_vs_parameter_data)
-from .settings import CaseSummary, FigureSettings
+from .quality import (
+    comparisons_data,
+    draw_comparisons,
+    draw_quality_vs_distance,
+    draw_quality_vs_fraction,
+    draw_quality_vs_parameter,
+    quality_vs_distance_data,
+    quality_vs_fraction_data,
+    quality_vs_parameter_data,
+)
 from .registration import draw_registration, registration_data
+from .settings import CaseSummary, FigureSettings
 from .signal import draw_quality_vs_signal, quality_vs_signal_data
-from .tables import (draw_long_exposure_check, draw_long_exposure_table, long_exposure_check_data,
-                     long_exposure_markdown, long_exposure_table_data, value_with_error)
+from .tables import (
+    draw_long_exposure_check,
+    draw_long_exposure_table,
+    long_exposure_check_data,
+    long_exposure_markdown,
+    long_exposure_table_data,
+    value_with_error,
+)
 from .wavefront import asterism_data, draw_asterism, draw_residuals, draw_rms_truth, residuals_data, rms_truth_data
 
 log = logging.getLogger(__name__)
@@ -61,8 +75,7 @@ def baseline_registration(ds):
     return ds.sel(registration="cog") if "registration" in ds.dims else ds
 
 
-__all__ = ["FIGURE_KINDS", "CaseSummary", "FigureSettings", "draw_figure", "long_exposure_markdown",
-           "value_with_error"]
+__all__ = ["FIGURE_KINDS", "CaseSummary", "FigureSettings", "draw_figure", "long_exposure_markdown", "value_with_error"]
 
 
 def draw_figure(fig_id: str, settings: dict, lucky_paths, out_prefix: str) -> None:
@@ -90,6 +103,8 @@ def figure_page(fig_id: str, png: bytes) -> str:
     """A one-image HTML page that shows the PNG at the width of the window (the report's
     view of a figure: its image viewer can show a PNG zero pixels wide)."""
     name = html.escape(fig_id)
-    return ("<!DOCTYPE html><html><head><meta charset=\"utf-8\"><title>" + name + "</title><style>body{margin:0}"
-            "img{display:block;width:100%;height:auto}</style></head><body><img alt=\"" + name + "\" "
-            "src=\"data:image/png;base64," + base64.b64encode(png).decode() + "\"></body></html>\n")
+    return (
+        '<!DOCTYPE html><html><head><meta charset="utf-8"><title>' + name + "</title><style>body{margin:0}"
+        'img{display:block;width:100%;height:auto}</style></head><body><img alt="' + name + '" '
+        'src="data:image/png;base64,' + base64.b64encode(png).decode() + '"></body></html>\n'
+    )

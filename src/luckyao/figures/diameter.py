@@ -42,8 +42,10 @@ def quality_vs_diameter_data(settings: FigureSettings, datasets) -> xr.Dataset:
     where = {}
     for i, (label, diameter) in enumerate(zip(labels, diameters)):
         if (label, diameter) in where:
-            raise ValueError(f"cases {settings.cases[where[label, diameter]]} and {settings.cases[i]}: both "
-                             f"{label} at {diameter:g} m")
+            raise ValueError(
+                f"cases {settings.cases[where[label, diameter]]} and {settings.cases[i]}: both "
+                f"{label} at {diameter:g} m"
+            )
         where[label, diameter] = i
     criteria, fractions = list(settings.criteria), list(settings.fractions)
     thresholds = list(settings.strehl_thresholds)
@@ -53,8 +55,12 @@ def quality_vs_diameter_data(settings: FigureSettings, datasets) -> xr.Dataset:
         for name in with_error(datasets, metric):
             table = np.full(shape + (len(criteria), len(fractions)), np.nan)
             for (label, diameter), i in where.items():
-                table[series.index(label), x_values.index(diameter)] = datasets[i][name].sel(
-                    criterion=criteria, fraction=fractions, detector=settings.detector).isel(target=0).values
+                table[series.index(label), x_values.index(diameter)] = (
+                    datasets[i][name]
+                    .sel(criterion=criteria, fraction=fractions, detector=settings.detector)
+                    .isel(target=0)
+                    .values
+                )
             data[name] = (("series", "diameter", "criterion", "fraction"), table, dict(datasets[0][name].attrs))
     probability, error = np.full(shape + (len(thresholds),), np.nan), np.full(shape + (len(thresholds),), np.nan)
     for (label, diameter), i in where.items():
@@ -63,23 +69,34 @@ def quality_vs_diameter_data(settings: FigureSettings, datasets) -> xr.Dataset:
         cell = series.index(label), x_values.index(diameter)
         for k, threshold in enumerate(thresholds):
             probability[cell + (k,)], error[cell + (k,)] = lucky_frame_probability(
-                frames.values, threshold, datasets[i].sizes.get("block", 0))
+                frames.values, threshold, datasets[i].sizes.get("block", 0)
+            )
     dims = ("series", "diameter", "threshold")
-    data["lucky_probability"] = (dims, probability, {
-        "units": "1", "long_name": "fraction of frames whose short-exposure Strehl exceeds the threshold"})
-    data["lucky_probability_error"] = (dims, error, {
-        "units": "1", "long_name": "Monte-Carlo standard error of lucky_probability (time blocks, batch means)"})
+    data["lucky_probability"] = (
+        dims,
+        probability,
+        {"units": "1", "long_name": "fraction of frames whose short-exposure Strehl exceeds the threshold"},
+    )
+    data["lucky_probability_error"] = (
+        dims,
+        error,
+        {"units": "1", "long_name": "Monte-Carlo standard error of lucky_probability (time blocks, batch means)"},
+    )
     cases = np.full(shape, "", dtype=object)
     for (label, diameter), i in where.items():
         cases[series.index(label), x_values.index(diameter)] = settings.cases[i]
-    return xr.Dataset(data, coords={
-        "series": ("series", series, {"long_name": "AO mode and beacon height"}),
-        "diameter": ("diameter", x_values, {"units": "m", "long_name": "telescope diameter"}),
-        "criterion": ("criterion", criteria, {"long_name": "selection criterion"}),
-        "fraction": ("fraction", fractions, {"units": "1", "long_name": "fraction of frames selected"}),
-        "threshold": ("threshold", thresholds, {"units": "1", "long_name": "short-exposure Strehl threshold"}),
-        "case": (("series", "diameter"), cases.astype(str), {"long_name": "the case of each point ('' none)"})},
-        attrs={"detector": settings.detector})
+    return xr.Dataset(
+        data,
+        coords={
+            "series": ("series", series, {"long_name": "AO mode and beacon height"}),
+            "diameter": ("diameter", x_values, {"units": "m", "long_name": "telescope diameter"}),
+            "criterion": ("criterion", criteria, {"long_name": "selection criterion"}),
+            "fraction": ("fraction", fractions, {"units": "1", "long_name": "fraction of frames selected"}),
+            "threshold": ("threshold", thresholds, {"units": "1", "long_name": "short-exposure Strehl threshold"}),
+            "case": (("series", "diameter"), cases.astype(str), {"long_name": "the case of each point ('' none)"}),
+        },
+        attrs={"detector": settings.detector},
+    )
 
 
 def draw_quality_vs_diameter(ds: xr.Dataset, title: str):
@@ -95,16 +112,26 @@ def draw_quality_vs_diameter(ds: xr.Dataset, title: str):
             ax.set_xlabel("telescope diameter [m]")
             ax.set_ylabel(name)
             ax.grid(alpha=0.3)
-        axes[r, 0].set_title(f"({chr(ord('a') + r)}) selection by {CRITERIA.get(criterion, criterion)}",
-                             loc="left", fontsize=10)
+        axes[r, 0].set_title(
+            f"({chr(ord('a') + r)}) selection by {CRITERIA.get(criterion, criterion)}", loc="left", fontsize=10
+        )
         axes[r, 2].set_visible(r == 0)
     ax = axes[0, 2]
     for s, series in enumerate(ds.series.values):
         for k, threshold in enumerate(ds.threshold.values):
             cell = ds.sel(series=series, threshold=threshold)
-            ax.errorbar(x, cell.lucky_probability.values, yerr=cell.lucky_probability_error.values, color=colour(s),
-                        ls=LINE_STYLES[k % 4], marker=MARKERS[k % 8], ms=4, capsize=2, lw=1.2,
-                        label=f"{series}, S > {threshold:g}")
+            ax.errorbar(
+                x,
+                cell.lucky_probability.values,
+                yerr=cell.lucky_probability_error.values,
+                color=colour(s),
+                ls=LINE_STYLES[k % 4],
+                marker=MARKERS[k % 8],
+                ms=4,
+                capsize=2,
+                lw=1.2,
+                label=f"{series}, S > {threshold:g}",
+            )
     ax.set_yscale("symlog", linthresh=1e-3)
     ax.set_ylim(0, 1)
     ax.set_xlabel("telescope diameter [m]")
@@ -112,8 +139,14 @@ def draw_quality_vs_diameter(ds: xr.Dataset, title: str):
     ax.set_title("probability of a lucky frame\n(short-exposure Strehl above a threshold)", loc="left", fontsize=9)
     ax.grid(alpha=0.3)
     ax.legend(fontsize=7)
-    fig.legend(*axes[0, 0].get_legend_handles_labels(), loc="outside lower center", ncol=ds.sizes["fraction"],
-               fontsize=8, title="colour: AO and beacons; line style and marker: fraction of frames selected\n"
-                                 "error bars: ±1 Monte-Carlo standard error (time blocks)", title_fontsize=8)
+    fig.legend(
+        *axes[0, 0].get_legend_handles_labels(),
+        loc="outside lower center",
+        ncol=ds.sizes["fraction"],
+        fontsize=8,
+        title="colour: AO and beacons; line style and marker: fraction of frames selected\n"
+        "error bars: ±1 Monte-Carlo standard error (time blocks)",
+        title_fontsize=8,
+    )
     fig.suptitle(f"{title}: integrated-image quality vs telescope diameter ({ds.attrs['detector']} detector)")
     return fig

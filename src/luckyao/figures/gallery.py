@@ -37,15 +37,23 @@ def psf_gallery_data(settings: FigureSettings, datasets) -> xr.Dataset:
     scale = float(datasets[0].attrs["pixel_scale_arcsec"])
     return xr.Dataset(
         {
-            "image": (("case", "panel", "y", "x"), np.array(images, dtype=np.float32), {
-                "units": "1", "long_name": "intensity over the diffraction-limited peak of the same flux"}),
-            "strehl": (("case", "panel"), np.array(strehls), {
-                "units": "1", "long_name": "Strehl ratio of the panel's image (of the whole frame)"}),
+            "image": (
+                ("case", "panel", "y", "x"),
+                np.array(images, dtype=np.float32),
+                {"units": "1", "long_name": "intensity over the diffraction-limited peak of the same flux"},
+            ),
+            "strehl": (
+                ("case", "panel"),
+                np.array(strehls),
+                {"units": "1", "long_name": "Strehl ratio of the panel's image (of the whole frame)"},
+            ),
         },
-        coords={**case_coords(settings, datasets),
-                "panel": ("panel", ["long exposure"] + panels, {"long_name": "image shown"}),
-                "y": ("y", offsets * scale, {"units": "arcsec", "long_name": "offset from the axis"}),
-                "x": ("x", offsets * scale, {"units": "arcsec", "long_name": "offset from the axis"})},
+        coords={
+            **case_coords(settings, datasets),
+            "panel": ("panel", ["long exposure"] + panels, {"long_name": "image shown"}),
+            "y": ("y", offsets * scale, {"units": "arcsec", "long_name": "offset from the axis"}),
+            "x": ("x", offsets * scale, {"units": "arcsec", "long_name": "offset from the axis"}),
+        },
         attrs={"detector": settings.detector, "pixel_scale_arcsec": scale},
     )
 
@@ -61,10 +69,17 @@ def draw_psf_gallery(ds: xr.Dataset, title: str):
     for r, case in enumerate(ds.case.values):
         for c, panel in enumerate(ds.panel.values):
             ax, cell = axes[r, c], ds.sel(case=case, panel=panel)
-            shown = ax.imshow(np.clip(cell.image.values, norm.vmin, None), origin="lower", extent=extent,
-                              norm=norm, cmap="magma", interpolation="nearest")
-            ax.text(0.04, 0.95, f"Strehl {float(cell.strehl):.3f}", transform=ax.transAxes, color="w",
-                    fontsize=8, va="top")
+            shown = ax.imshow(
+                np.clip(cell.image.values, norm.vmin, None),
+                origin="lower",
+                extent=extent,
+                norm=norm,
+                cmap="magma",
+                interpolation="nearest",
+            )
+            ax.text(
+                0.04, 0.95, f"Strehl {float(cell.strehl):.3f}", transform=ax.transAxes, color="w", fontsize=8, va="top"
+            )
             if r == 0:
                 ax.set_title(str(panel), fontsize=9)
             if c == 0:

@@ -6,8 +6,18 @@ import xarray as xr
 
 from ..lucky.accumulation import batch_mean_error
 from .settings import FigureSettings, case_coords
-from .style import (AO_STYLE, CRITERIA, LINE_STYLES, MARKERS, METRICS, band, colour, new_figure,
-                    series_fraction_lines, with_error)
+from .style import (
+    AO_STYLE,
+    CRITERIA,
+    LINE_STYLES,
+    MARKERS,
+    METRICS,
+    band,
+    colour,
+    new_figure,
+    series_fraction_lines,
+    with_error,
+)
 
 NOISE_DOMINATED = 0.3
 """A noisy detector's value is noise-dominated when it departs from the value of the same
@@ -27,9 +37,15 @@ def _noise_flags(data: dict, dims, rows) -> None:
     """Add ``<metric>_noise_dominated`` (int8) to ``data`` from per-case selections ``rows``."""
     for metric in METRICS:
         flags = np.array([noise_dominated(row, metric).values for row in rows], dtype=np.int8)
-        data[f"{metric}_noise_dominated"] = (dims, flags, {
-            "units": "1", "long_name": f"1 where {metric} departs by more than {NOISE_DOMINATED:.0%} from the same "
-                                       "selection on the noiseless frames (noise-dominated, not drawn)"})
+        data[f"{metric}_noise_dominated"] = (
+            dims,
+            flags,
+            {
+                "units": "1",
+                "long_name": f"1 where {metric} departs by more than {NOISE_DOMINATED:.0%} from the same "
+                "selection on the noiseless frames (noise-dominated, not drawn)",
+            },
+        )
 
 
 def _drawn(values: xr.Dataset, metric: str) -> np.ndarray:
@@ -46,16 +62,27 @@ def quality_vs_fraction_data(settings: FigureSettings, datasets) -> xr.Dataset:
     rows = [ds.sel(criterion=criteria, detector=detector).isel(target=0) for ds in datasets]
     for metric in METRICS:
         for name in with_error(datasets, metric):
-            data_vars[name] = (("case", "criterion", "fraction"), np.array([row[name].values for row in rows]),
-                               dict(datasets[0][name].attrs))
+            data_vars[name] = (
+                ("case", "criterion", "fraction"),
+                np.array([row[name].values for row in rows]),
+                dict(datasets[0][name].attrs),
+            )
     _noise_flags(data_vars, ("case", "criterion", "fraction"), rows)
     long_exposure = [ds["long_exposure_strehl"].sel(detector=detector).isel(target=0).values for ds in datasets]
-    data_vars["long_exposure_strehl"] = (("case", "recentring"), np.array(long_exposure),
-                                         dict(datasets[0]["long_exposure_strehl"].attrs))
-    ds = xr.Dataset(data_vars, coords={**case_coords(settings, datasets),
-                                       "criterion": ("criterion", criteria, {"long_name": "selection criterion"}),
-                                       "fraction": datasets[0]["fraction"],
-                                       "recentring": datasets[0]["recentring"]})
+    data_vars["long_exposure_strehl"] = (
+        ("case", "recentring"),
+        np.array(long_exposure),
+        dict(datasets[0]["long_exposure_strehl"].attrs),
+    )
+    ds = xr.Dataset(
+        data_vars,
+        coords={
+            **case_coords(settings, datasets),
+            "criterion": ("criterion", criteria, {"long_name": "selection criterion"}),
+            "fraction": datasets[0]["fraction"],
+            "recentring": datasets[0]["recentring"],
+        },
+    )
     ds.attrs.update(detector=detector)
     return ds
 
@@ -67,8 +94,14 @@ def _case_style(ds: xr.Dataset, case) -> dict:
 
 def _legend_note(ds: xr.Dataset) -> str:
     dropped = any(int(ds[v].sum()) for v in ds.data_vars if v.endswith("_noise_dominated"))
-    return (f"\nnoise-dominated points (more than {NOISE_DOMINATED:.0%} off the same selection on the noiseless "
-            "frames) left out") if dropped else ""
+    return (
+        (
+            f"\nnoise-dominated points (more than {NOISE_DOMINATED:.0%} off the same selection on the noiseless "
+            "frames) left out"
+        )
+        if dropped
+        else ""
+    )
 
 
 def draw_quality_vs_fraction(ds: xr.Dataset, title: str):
@@ -83,17 +116,24 @@ def draw_quality_vs_fraction(ds: xr.Dataset, title: str):
                 ax.plot(x, _drawn(row, metric), marker="o", ms=3, label=str(row.label.values), **style)
                 band(ax, x, row, metric, style["color"])
                 if metric == "strehl":
-                    ax.axhline(float(row.long_exposure_strehl.sel(recentring="none")), lw=0.8,
-                               color=style["color"], ls=":")
+                    ax.axhline(
+                        float(row.long_exposure_strehl.sel(recentring="none")), lw=0.8, color=style["color"], ls=":"
+                    )
             ax.set_xscale("log")
             ax.set_xlabel("frames selected [%]")
             ax.set_ylabel(METRICS[metric])
             ax.grid(alpha=0.3)
         letter = f"({chr(ord('a') + r)}) " if n_rows > 1 else ""
         axes[r, 0].set_title(f"{letter}selection by {CRITERIA.get(criterion, criterion)}", loc="left", fontsize=10)
-    fig.legend(*axes[0, 0].get_legend_handles_labels(), loc="outside lower center", ncol=4, fontsize=8,
-               title="colour: case; dotted: long exposure (no recentring)\nbands: ±1 Monte-Carlo standard error"
-                     + _legend_note(ds), title_fontsize=8)
+    fig.legend(
+        *axes[0, 0].get_legend_handles_labels(),
+        loc="outside lower center",
+        ncol=4,
+        fontsize=8,
+        title="colour: case; dotted: long exposure (no recentring)\nbands: ±1 Monte-Carlo standard error"
+        + _legend_note(ds),
+        title_fontsize=8,
+    )
     fig.suptitle(f"{title}: integrated-image quality vs fraction selected ({ds.attrs['detector']} detector)")
     return fig
 
@@ -111,23 +151,48 @@ def quality_vs_distance_data(settings: FigureSettings, datasets) -> xr.Dataset:
         if other.shape != distance.shape or not np.allclose(other, distance):
             raise ValueError(f"case {name}: targets at {other} arcsec, the first case's at {distance}")
     sel = ("case", "criterion", "fraction", "distance")
-    data = {name: (sel, np.array([ds[name].sel(criterion=criteria, fraction=fractions, detector=detector)
-                                  .transpose("criterion", "fraction", "target").values for ds in datasets]),
-                   dict(first[name].attrs)) for metric in METRICS for name in with_error(datasets, metric)}
-    data["long_exposure_strehl"] = (("case", "distance"), np.array(
-        [ds.long_exposure_strehl.sel(recentring="none", detector=detector).values for ds in datasets]),
-        {"units": "1", "long_name": "long-exposure Strehl ratio without recentring"})
-    data["mean_true_rms_nm"] = (("case", "distance"), np.array([ds.true_rms_nm.mean("frame").values
-                                                                for ds in datasets]),
-                                {"units": "nm", "long_name": "mean true tilt-removed residual rms along the target"})
-    data["reference_target"] = ("case", [int(ds.reference_target) for ds in datasets],
-                                {"units": "1", "long_name": "target that selects and recentres (-1: each its own)"})
-    return xr.Dataset(data, coords={
-        **case_coords(settings, datasets),
-        "criterion": ("criterion", criteria, {"long_name": "selection criterion"}),
-        "fraction": ("fraction", fractions, {"units": "1", "long_name": "fraction of frames selected"}),
-        "distance": ("distance", distance, {"units": "arcsec", "long_name": "target's off-axis distance"})},
-        attrs={"detector": detector})
+    data = {
+        name: (
+            sel,
+            np.array(
+                [
+                    ds[name]
+                    .sel(criterion=criteria, fraction=fractions, detector=detector)
+                    .transpose("criterion", "fraction", "target")
+                    .values
+                    for ds in datasets
+                ]
+            ),
+            dict(first[name].attrs),
+        )
+        for metric in METRICS
+        for name in with_error(datasets, metric)
+    }
+    data["long_exposure_strehl"] = (
+        ("case", "distance"),
+        np.array([ds.long_exposure_strehl.sel(recentring="none", detector=detector).values for ds in datasets]),
+        {"units": "1", "long_name": "long-exposure Strehl ratio without recentring"},
+    )
+    data["mean_true_rms_nm"] = (
+        ("case", "distance"),
+        np.array([ds.true_rms_nm.mean("frame").values for ds in datasets]),
+        {"units": "nm", "long_name": "mean true tilt-removed residual rms along the target"},
+    )
+    data["reference_target"] = (
+        "case",
+        [int(ds.reference_target) for ds in datasets],
+        {"units": "1", "long_name": "target that selects and recentres (-1: each its own)"},
+    )
+    return xr.Dataset(
+        data,
+        coords={
+            **case_coords(settings, datasets),
+            "criterion": ("criterion", criteria, {"long_name": "selection criterion"}),
+            "fraction": ("fraction", fractions, {"units": "1", "long_name": "fraction of frames selected"}),
+            "distance": ("distance", distance, {"units": "arcsec", "long_name": "target's off-axis distance"}),
+        },
+        attrs={"detector": detector},
+    )
 
 
 def draw_quality_vs_distance(ds: xr.Dataset, title: str):
@@ -140,27 +205,46 @@ def draw_quality_vs_distance(ds: xr.Dataset, title: str):
                 shade = colour(int(ds.colour.sel(case=case)))
                 for k, fraction in enumerate(ds.fraction.values):
                     cell = ds.sel(case=case, criterion=criterion, fraction=fraction)
-                    ax.plot(ds.distance, cell[metric], marker=MARKERS[k % 8], ms=3.5, color=shade,
-                            ls=LINE_STYLES[k % 4], label=f"{cell.label.values}, {100 * fraction:g} %")
+                    ax.plot(
+                        ds.distance,
+                        cell[metric],
+                        marker=MARKERS[k % 8],
+                        ms=3.5,
+                        color=shade,
+                        ls=LINE_STYLES[k % 4],
+                        label=f"{cell.label.values}, {100 * fraction:g} %",
+                    )
                     band(ax, ds.distance, cell, metric, shade)
             ax.set_xlabel("off-axis distance [arcsec]")
             ax.set_ylabel(METRICS[metric])
             ax.grid(alpha=0.3)
-        axes[r, 0].set_title(f"({chr(ord('a') + r)}) selection by {CRITERIA.get(criterion, criterion)}",
-                             loc="left", fontsize=10)
+        axes[r, 0].set_title(
+            f"({chr(ord('a') + r)}) selection by {CRITERIA.get(criterion, criterion)}", loc="left", fontsize=10
+        )
         axes[r, 3].set_visible(r == 0)
     ax = axes[0, 3]
     for case in ds.case.values:
-        ax.plot(ds.distance, ds.mean_true_rms_nm.sel(case=case), marker="o", ms=3.5,
-                color=colour(int(ds.colour.sel(case=case))), label=str(ds.label.sel(case=case).values))
+        ax.plot(
+            ds.distance,
+            ds.mean_true_rms_nm.sel(case=case),
+            marker="o",
+            ms=3.5,
+            color=colour(int(ds.colour.sel(case=case))),
+            label=str(ds.label.sel(case=case).values),
+        )
     ax.set_xlabel("off-axis distance [arcsec]")
     ax.set_ylabel("mean true tilt-removed rms [nm]")
     ax.set_title("residual wavefront along the target", loc="left", fontsize=10)
     ax.grid(alpha=0.3)
-    fig.legend(*axes[0, 0].get_legend_handles_labels(), loc="outside lower center", ncol=3, fontsize=8,
-               title="colour: case; line style and marker: fraction of frames\nimage criteria and recentring "
-                     "from the on-axis star, lgs_rms along each target\nbands: ±1 Monte-Carlo standard error",
-               title_fontsize=8)
+    fig.legend(
+        *axes[0, 0].get_legend_handles_labels(),
+        loc="outside lower center",
+        ncol=3,
+        fontsize=8,
+        title="colour: case; line style and marker: fraction of frames\nimage criteria and recentring "
+        "from the on-axis star, lgs_rms along each target\nbands: ±1 Monte-Carlo standard error",
+        title_fontsize=8,
+    )
     fig.suptitle(f"{title}: integrated-image quality vs off-axis distance ({ds.attrs['detector']} detector)")
     return fig
 
@@ -185,8 +269,12 @@ def quality_vs_parameter_data(settings: FigureSettings, datasets) -> xr.Dataset:
             for s, key in enumerate(series):
                 for j, x in enumerate(x_values):
                     ds = datasets[where[(key, x)]]
-                    table[s, j] = ds[name].sel(criterion=criteria, fraction=fractions,
-                                               detector=settings.detector).isel(target=0).values
+                    table[s, j] = (
+                        ds[name]
+                        .sel(criterion=criteria, fraction=fractions, detector=settings.detector)
+                        .isel(target=0)
+                        .values
+                    )
             data[name] = (dims, table, dict(datasets[0][name].attrs))
     leaf = {p: p.rsplit(".", 1)[-1] for p in others}
     label = [", ".join(f"{leaf[p]} {v}" for p, v in zip(others, key)) or "all" for key in series]
@@ -196,19 +284,29 @@ def quality_vs_parameter_data(settings: FigureSettings, datasets) -> xr.Dataset:
             for j, x in enumerate(x_values):
                 ds = datasets[where[(key, x)]]
                 lost[s, j], error[s, j] = flux_lost(ds.transmitted_flux.values, ds.sizes.get("block", 0))
-        data["flux_lost"] = (("series", "x"), lost, {
-            "units": "1", "long_name": "mean fraction of the source's flux blocked by the apodisation"})
-        data["flux_lost_error"] = (("series", "x"), error, {
-            "units": "1", "long_name": "Monte-Carlo standard error of flux_lost (time blocks, batch means)"})
+        data["flux_lost"] = (
+            ("series", "x"),
+            lost,
+            {"units": "1", "long_name": "mean fraction of the source's flux blocked by the apodisation"},
+        )
+        data["flux_lost_error"] = (
+            ("series", "x"),
+            error,
+            {"units": "1", "long_name": "Monte-Carlo standard error of flux_lost (time blocks, batch means)"},
+        )
     cases = [[points[where[(key, x)]][0] for x in x_values] for key in series]
     numeric = all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in x_values)
-    return xr.Dataset(data, coords={
-        "series": ("series", label, {"long_name": "the other parameters' values"}),
-        "x": ("x", x_values if numeric else [str(x) for x in x_values], {"long_name": parameter}),
-        "criterion": ("criterion", criteria, {"long_name": "selection criterion"}),
-        "fraction": ("fraction", fractions, {"units": "1", "long_name": "fraction of frames selected"}),
-        "case": (("series", "x"), cases, {"long_name": "the case of each point"})},
-        attrs={"detector": settings.detector, "parameter": parameter, "sweep": settings.sweep})
+    return xr.Dataset(
+        data,
+        coords={
+            "series": ("series", label, {"long_name": "the other parameters' values"}),
+            "x": ("x", x_values if numeric else [str(x) for x in x_values], {"long_name": parameter}),
+            "criterion": ("criterion", criteria, {"long_name": "selection criterion"}),
+            "fraction": ("fraction", fractions, {"units": "1", "long_name": "fraction of frames selected"}),
+            "case": (("series", "x"), cases, {"long_name": "the case of each point"}),
+        },
+        attrs={"detector": settings.detector, "parameter": parameter, "sweep": settings.sweep},
+    )
 
 
 def flux_lost(transmitted_flux: np.ndarray, n_blocks: int) -> tuple[float, float]:
@@ -242,17 +340,33 @@ def draw_quality_vs_parameter(ds: xr.Dataset, title: str):
         ax = axes[0, 3]
         for s, series in enumerate(ds.series.values):
             cell = ds.sel(series=series)
-            ax.errorbar(x, cell.flux_lost.values, yerr=cell.flux_lost_error.values, color=colour(s), marker="o",
-                        ms=4, capsize=2, lw=1.2)
+            ax.errorbar(
+                x,
+                cell.flux_lost.values,
+                yerr=cell.flux_lost_error.values,
+                color=colour(s),
+                marker="o",
+                ms=4,
+                capsize=2,
+                lw=1.2,
+            )
         ax.set_xlabel(ds.attrs["parameter"])
         ax.set_ylabel("flux lost (fraction of the source's)")
         ax.set_title("flux blocked by the apodisation", loc="left", fontsize=9)
         ax.grid(alpha=0.3)
-    fig.legend(*axes[0, 0].get_legend_handles_labels(), loc="outside lower center", ncol=ds.sizes["fraction"],
-               fontsize=8, title="colour: the sweep's other parameters; line style and marker: fraction of frames "
-                                 "selected\nerror bars: ±1 Monte-Carlo standard error", title_fontsize=8)
-    fig.suptitle(f"{title}: integrated-image quality vs {ds.attrs['parameter']} (sweep {ds.attrs['sweep']}, "
-                 f"{ds.attrs['detector']} detector)")
+    fig.legend(
+        *axes[0, 0].get_legend_handles_labels(),
+        loc="outside lower center",
+        ncol=ds.sizes["fraction"],
+        fontsize=8,
+        title="colour: the sweep's other parameters; line style and marker: fraction of frames "
+        "selected\nerror bars: ±1 Monte-Carlo standard error",
+        title_fontsize=8,
+    )
+    fig.suptitle(
+        f"{title}: integrated-image quality vs {ds.attrs['parameter']} (sweep {ds.attrs['sweep']}, "
+        f"{ds.attrs['detector']} detector)"
+    )
     return fig
 
 
@@ -267,8 +381,12 @@ def comparisons_data(settings: FigureSettings, datasets) -> xr.Dataset:
     for metric, long_name in METRICS.items():
         value, paired, unpaired = [], [], []
         for pair in pairs:
-            a, b = (by_name[pair[k]["case"]][[metric, f"{metric}_error", f"{metric}_block"]].sel(
-                criterion=pair[k]["criterion"], detector=settings.detector).isel(target=0) for k in ("a", "b"))
+            a, b = (
+                by_name[pair[k]["case"]][[metric, f"{metric}_error", f"{metric}_block"]]
+                .sel(criterion=pair[k]["criterion"], detector=settings.detector)
+                .isel(target=0)
+                for k in ("a", "b")
+            )
             if a.sizes["block"] != b.sizes["block"]:
                 raise ValueError(f"pair {pair['label']}: {a.sizes['block']} and {b.sizes['block']} time blocks")
             blocks = (a[f"{metric}_block"] - b[f"{metric}_block"]).values  # (block, fraction)
@@ -278,15 +396,26 @@ def comparisons_data(settings: FigureSettings, datasets) -> xr.Dataset:
         units = datasets[0][metric].attrs["units"]
         dims = ("pair", "fraction")
         data[metric] = (dims, np.array(value), {"units": units, "long_name": f"difference a - b: {long_name}"})
-        data[f"{metric}_error"] = (dims, np.array(paired), {
-            "units": units, "long_name": "paired Monte-Carlo standard error of the difference (time blocks)"})
-        data[f"{metric}_unpaired_error"] = (dims, np.array(unpaired), {
-            "units": units, "long_name": "unpaired error sqrt(e_a^2 + e_b^2), for comparison"})
-    return xr.Dataset(data, coords={
-        "pair": ("pair", [p["label"] for p in pairs], {"long_name": "difference a - b"}),
-        "a": ("pair", [f"{p['a']['case']} by {p['a']['criterion']}" for p in pairs], {"long_name": "case a"}),
-        "b": ("pair", [f"{p['b']['case']} by {p['b']['criterion']}" for p in pairs], {"long_name": "case b"}),
-        "fraction": datasets[0]["fraction"]}, attrs={"detector": settings.detector})
+        data[f"{metric}_error"] = (
+            dims,
+            np.array(paired),
+            {"units": units, "long_name": "paired Monte-Carlo standard error of the difference (time blocks)"},
+        )
+        data[f"{metric}_unpaired_error"] = (
+            dims,
+            np.array(unpaired),
+            {"units": units, "long_name": "unpaired error sqrt(e_a^2 + e_b^2), for comparison"},
+        )
+    return xr.Dataset(
+        data,
+        coords={
+            "pair": ("pair", [p["label"] for p in pairs], {"long_name": "difference a - b"}),
+            "a": ("pair", [f"{p['a']['case']} by {p['a']['criterion']}" for p in pairs], {"long_name": "case a"}),
+            "b": ("pair", [f"{p['b']['case']} by {p['b']['criterion']}" for p in pairs], {"long_name": "case b"}),
+            "fraction": datasets[0]["fraction"],
+        },
+        attrs={"detector": settings.detector},
+    )
 
 
 def draw_comparisons(ds: xr.Dataset, title: str):
@@ -305,8 +434,14 @@ def draw_comparisons(ds: xr.Dataset, title: str):
         ax.set_xlabel("frames selected [%]")
         ax.set_ylabel(f"difference of {METRICS[metric]}")
         ax.grid(alpha=0.3)
-    fig.legend(*axes[0, 0].get_legend_handles_labels(), loc="outside lower center", ncol=4, fontsize=8,
-               title="colour: difference a - b\nbands: paired ±1 standard error (time blocks, shared turbulence); "
-                     "dotted: unpaired ±1 standard error", title_fontsize=8)
+    fig.legend(
+        *axes[0, 0].get_legend_handles_labels(),
+        loc="outside lower center",
+        ncol=4,
+        fontsize=8,
+        title="colour: difference a - b\nbands: paired ±1 standard error (time blocks, shared turbulence); "
+        "dotted: unpaired ±1 standard error",
+        title_fontsize=8,
+    )
     fig.suptitle(f"{title}: paired differences of integrated-image quality ({ds.attrs['detector']} detector)")
     return fig

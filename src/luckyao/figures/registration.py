@@ -66,8 +66,13 @@ def registration_data(settings: FigureSettings, datasets) -> xr.Dataset:
     ds = ds.assign_coords(registration=("registration", methods, {"long_name": "registration method"}))
     for metric in REGISTRATION_METRICS:
         ds[f"{metric}_knee_photons"] = knees(ds, metric)
-    ds.attrs.update(i_zero_photons_per_frame=photons_at_zero_magnitude(), i_zero_point_w_m2_um=I_ZERO_POINT_W_M2_UM,
-                    i_bandwidth_um=I_BANDWIDTH_UM, throughput=THROUGHPUT, frame_time_s=FRAME_TIME_S)
+    ds.attrs.update(
+        i_zero_photons_per_frame=photons_at_zero_magnitude(),
+        i_zero_point_w_m2_um=I_ZERO_POINT_W_M2_UM,
+        i_bandwidth_um=I_BANDWIDTH_UM,
+        throughput=THROUGHPUT,
+        frame_time_s=FRAME_TIME_S,
+    )
     return ds
 
 
@@ -100,24 +105,38 @@ def knees(ds: xr.Dataset, metric: str) -> xr.DataArray:
         a = outside[-1]  # last point outside; a + 1 inside
         t = (tolerance - r[a]) / (r[a + 1] - r[a]) if np.isfinite(r[a]) and r[a + 1] != r[a] else 1.0
         out[j] = 10 ** (log_signal[a] + np.clip(t, 0, 1) * (log_signal[a + 1] - log_signal[a]))
-    return xr.DataArray(out.reshape(inside.shape[:-1]), dims=inside.dims[:-1], attrs={
-        "units": "photon", "long_name": f"detected photons per frame from which {metric} stays within "
-                                        f"{abs(1 - tolerance):.0%} of the noiseless detector's (NaN: never)"})
+    return xr.DataArray(
+        out.reshape(inside.shape[:-1]),
+        dims=inside.dims[:-1],
+        attrs={
+            "units": "photon",
+            "long_name": f"detected photons per frame from which {metric} stays within "
+            f"{abs(1 - tolerance):.0%} of the noiseless detector's (NaN: never)",
+        },
+    )
 
 
 def knee_markdown(ds: xr.Dataset, fraction: float, criterion: str, read_noise: float) -> str:
     """The knees of a registration figure's dataset as a Markdown table: a row per case and method."""
-    lines = ["| case | registration | Strehl knee [photons/frame] (I mag) | d50 knee [photons/frame] (I mag) |",
-             "|---|---|---|---|"]
+    lines = [
+        "| case | registration | Strehl knee [photons/frame] (I mag) | d50 knee [photons/frame] (I mag) |",
+        "|---|---|---|---|",
+    ]
     for case in ds.case.values:
         for method in ds.registration.values:
             cells = []
             for metric in REGISTRATION_METRICS:
-                knee = float(ds[f"{metric}_knee_photons"].sel(case=case, registration=method, fraction=fraction,
-                                                                criterion=criterion, read_noise=read_noise))
+                knee = float(
+                    ds[f"{metric}_knee_photons"].sel(
+                        case=case, registration=method, fraction=fraction, criterion=criterion, read_noise=read_noise
+                    )
+                )
                 at_most = "≤ " if knee == ds.signal.values[0] else ""  # inside down to the lowest signal drawn
-                cells.append("not reached" if np.isnan(knee) else
-                             f"{at_most}{knee:.3g} (I {'≥ ' if at_most else ''}{i_magnitude(knee):.1f})")
+                cells.append(
+                    "not reached"
+                    if np.isnan(knee)
+                    else f"{at_most}{knee:.3g} (I {'≥ ' if at_most else ''}{i_magnitude(knee):.1f})"
+                )
             lines.append(f"| {ds.label.sel(case=case).values} | {method} | {cells[0]} | {cells[1]} |")
     return "\n".join(lines)
 
@@ -136,18 +155,39 @@ def draw_registration(ds: xr.Dataset, title: str):
                 ax = axes[row, c]
                 for k, method in enumerate(ds.registration.values):
                     for s, criterion in enumerate(ds.criterion.values):
-                        cell = ds.sel(case=case, criterion=criterion, fraction=fraction, read_noise=read_noise,
-                                      registration=method)
-                        ax.plot(ds.signal, cell[f"{metric}_noiseless"].values, color=colour(k), ls=LINE_STYLES[s % 4],
-                                marker="o", ms=2.5, label=f"{method}, by {CRITERIA.get(criterion, criterion)}")
-                        ax.axhline(float(cell[f"{metric}_noiseless_detector"]), color=colour(k), lw=0.5,
-                                   ls=LINE_STYLES[s % 4], alpha=0.5)
+                        cell = ds.sel(
+                            case=case,
+                            criterion=criterion,
+                            fraction=fraction,
+                            read_noise=read_noise,
+                            registration=method,
+                        )
+                        ax.plot(
+                            ds.signal,
+                            cell[f"{metric}_noiseless"].values,
+                            color=colour(k),
+                            ls=LINE_STYLES[s % 4],
+                            marker="o",
+                            ms=2.5,
+                            label=f"{method}, by {CRITERIA.get(criterion, criterion)}",
+                        )
+                        ax.axhline(
+                            float(cell[f"{metric}_noiseless_detector"]),
+                            color=colour(k),
+                            lw=0.5,
+                            ls=LINE_STYLES[s % 4],
+                            alpha=0.5,
+                        )
                 ax.set_xscale("log")
                 ax.set_ylabel(METRICS[metric])
                 if metric == "d50_arcsec":
                     ax.set_yscale("log")
-                ax.set_title(f"({chr(ord('a') + row * n_cols + c)}) {ds.label.sel(case=case).values}, read noise "
-                             f"{read_noise:g} e-", loc="left", fontsize=9)
+                ax.set_title(
+                    f"({chr(ord('a') + row * n_cols + c)}) {ds.label.sel(case=case).values}, read noise "
+                    f"{read_noise:g} e-",
+                    loc="left",
+                    fontsize=9,
+                )
                 ax.grid(alpha=0.3)
                 top = ax.secondary_xaxis("top", functions=(i_magnitude, photons_per_frame))
                 magnitudes = i_magnitude(ds.signal.values[[-1, 0]])
@@ -157,11 +197,17 @@ def draw_registration(ds: xr.Dataset, title: str):
                 top.set_xlabel("I magnitude" if row == 0 else "")
     for ax in axes[-1]:
         ax.set_xlabel("detected photons per frame")
-    fig.legend(*axes[0, 0].get_legend_handles_labels(), loc="outside lower center", ncol=2, fontsize=8,
-               title=f"{100 * fraction:g} % of frames, the noisy frames' selection and shifts scored on the noiseless "
-                     "frames; colour: registration;\nline style: selection criterion; "
-                     f"thin lines: noiseless detector.\nI magnitude: {ds.attrs['i_zero_photons_per_frame']:.3g} "
-                     f"photons per frame at I = 0\n({ds.attrs['i_bandwidth_um'] * 1e3:g} nm band, throughput "
-                     f"{ds.attrs['throughput']:g}, {ds.attrs['frame_time_s'] * 1e3:g} ms, 4.2 m)", title_fontsize=8)
+    fig.legend(
+        *axes[0, 0].get_legend_handles_labels(),
+        loc="outside lower center",
+        ncol=2,
+        fontsize=8,
+        title=f"{100 * fraction:g} % of frames, the noisy frames' selection and shifts scored on the noiseless "
+        "frames; colour: registration;\nline style: selection criterion; "
+        f"thin lines: noiseless detector.\nI magnitude: {ds.attrs['i_zero_photons_per_frame']:.3g} "
+        f"photons per frame at I = 0\n({ds.attrs['i_bandwidth_um'] * 1e3:g} nm band, throughput "
+        f"{ds.attrs['throughput']:g}, {ds.attrs['frame_time_s'] * 1e3:g} ms, 4.2 m)",
+        title_fontsize=8,
+    )
     fig.suptitle(f"{title}: integrated-image quality vs signal per frame,\nby registration method")
     return fig

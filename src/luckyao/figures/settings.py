@@ -21,10 +21,15 @@ class CaseSummary:
 
     @classmethod
     def of(cls, name: str, case: Case) -> "CaseSummary":
-        return cls(name=name, ao_mode=case.ao.mode, r0_cm=100 * case.r0.mean_m, r0_varies=case.r0.amplitude_m > 0,
-                   wfs_subapertures=case.wfs.n_subapertures if case.lgs else None,
-                   dm_actuators=case.ao.n_actuators if case.ao.mode != "none" else None,
-                   lgs_height_km=case.lgs.height_m / 1e3 if case.lgs else None)
+        return cls(
+            name=name,
+            ao_mode=case.ao.mode,
+            r0_cm=100 * case.r0.mean_m,
+            r0_varies=case.r0.amplitude_m > 0,
+            wfs_subapertures=case.wfs.n_subapertures if case.lgs else None,
+            dm_actuators=case.ao.n_actuators if case.ao.mode != "none" else None,
+            lgs_height_km=case.lgs.height_m / 1e3 if case.lgs else None,
+        )
 
     def parts(self) -> dict[str, str]:
         """Short descriptions by aspect, e.g. ``{"ao": "LTAO", "r0": "r0 13.5 cm", ...}``."""
@@ -104,8 +109,7 @@ def case_coords(settings: FigureSettings, datasets=()) -> dict:
     case: its mean r0 (the lucky dataset's, else the config's), short legend label, full
     summary, AO mode and colour index (its place in the figure)."""
     summaries = settings.summaries()
-    r0_cm = ([100 * float(ds["mean_r0_500nm_m"]) for ds in datasets] if datasets
-             else [s.r0_cm for s in summaries])
+    r0_cm = [100 * float(ds["mean_r0_500nm_m"]) for ds in datasets] if datasets else [s.r0_cm for s in summaries]
     return {
         "case": ("case", list(settings.cases), {"long_name": "case"}),
         "r0_cm": ("case", r0_cm, {"units": "cm", "long_name": "mean Fried parameter at 500 nm"}),

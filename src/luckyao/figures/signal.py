@@ -16,8 +16,9 @@ def quality_vs_signal_data(settings: FigureSettings, datasets) -> xr.Dataset:
     methods = [m for m in datasets[0].registration.values if all(m in ds.registration.values for ds in datasets)]
     per_method = [signal_data(settings, [ds.sel(registration=m) for ds in datasets]) for m in methods]
     ds = xr.concat(per_method, dim="registration", data_vars="all", coords="minimal", compat="override")
-    return ds.assign_coords(registration=("registration", [str(m) for m in methods],
-                                          {"long_name": "registration method"}))
+    return ds.assign_coords(
+        registration=("registration", [str(m) for m in methods], {"long_name": "registration method"})
+    )
 
 
 def signal_data(settings: FigureSettings, datasets) -> xr.Dataset:
@@ -30,12 +31,30 @@ def signal_data(settings: FigureSettings, datasets) -> xr.Dataset:
     first = datasets[0]
     sweep = settings.sweep_detectors  # name -> photons_per_frame, read_noise_e
     signal = np.unique([d["photons_per_frame"] for d in sweep.values()])
-    names_at = [[next(name for name, d in sweep.items() if d["read_noise_e"] == r and d["photons_per_frame"] == n)
-                 for n in signal] for r in read_noise]  # (read noise, signal) detector names
+    names_at = [
+        [
+            next(name for name, d in sweep.items() if d["read_noise_e"] == r and d["photons_per_frame"] == n)
+            for n in signal
+        ]
+        for r in read_noise
+    ]  # (read noise, signal) detector names
 
     def table(variable):
-        return np.array([[[[ds[variable].sel(criterion=c, fraction=f, detector=row).isel(target=0).values
-                            for row in names_at] for f in fractions] for c in criteria] for ds in datasets])
+        return np.array(
+            [
+                [
+                    [
+                        [
+                            ds[variable].sel(criterion=c, fraction=f, detector=row).isel(target=0).values
+                            for row in names_at
+                        ]
+                        for f in fractions
+                    ]
+                    for c in criteria
+                ]
+                for ds in datasets
+            ]
+        )
 
     dims = ("case", "criterion", "fraction", "read_noise", "signal")
     data = {name: (dims, table(name), dict(first[name].attrs)) for name in with_error(datasets, metric)}
@@ -43,22 +62,41 @@ def signal_data(settings: FigureSettings, datasets) -> xr.Dataset:
         clean = table(f"{metric}_noiseless")
         data[f"{metric}_noiseless"] = (dims, clean, dict(first[f"{metric}_noiseless"].attrs))
         flags = ~(np.abs(data[metric][1] - clean) <= NOISE_DOMINATED * np.abs(clean))
-        data[f"{metric}_noise_dominated"] = (dims, flags.astype(np.int8), {
-            "units": "1", "long_name": f"1 where {metric} departs by more than {NOISE_DOMINATED:.0%} from the same "
-                                       "selection on the noiseless frames (noise-dominated, not drawn)"})
+        data[f"{metric}_noise_dominated"] = (
+            dims,
+            flags.astype(np.int8),
+            {
+                "units": "1",
+                "long_name": f"1 where {metric} departs by more than {NOISE_DOMINATED:.0%} from the same "
+                "selection on the noiseless frames (noise-dominated, not drawn)",
+            },
+        )
     noiseless = first.detector[np.isnan(first.photons_per_frame.values)].values
     if noiseless.size:
-        reference = [[[ds[metric].sel(criterion=c, fraction=f, detector=noiseless[0]).isel(target=0).values
-                       for f in fractions] for c in criteria] for ds in datasets]
-        data[f"{metric}_noiseless_detector"] = (("case", "criterion", "fraction"), np.array(reference), {
-            **first[metric].attrs, "long_name": f"{first[metric].attrs['long_name']}, noiseless detector"})
+        reference = [
+            [
+                [
+                    ds[metric].sel(criterion=c, fraction=f, detector=noiseless[0]).isel(target=0).values
+                    for f in fractions
+                ]
+                for c in criteria
+            ]
+            for ds in datasets
+        ]
+        data[f"{metric}_noiseless_detector"] = (
+            ("case", "criterion", "fraction"),
+            np.array(reference),
+            {**first[metric].attrs, "long_name": f"{first[metric].attrs['long_name']}, noiseless detector"},
+        )
     return xr.Dataset(
         data,
-        coords={**case_coords(settings, datasets),
-                "criterion": ("criterion", criteria, {"long_name": "selection criterion"}),
-                "fraction": ("fraction", fractions, {"units": "1", "long_name": "fraction of frames selected"}),
-                "read_noise": ("read_noise", read_noise, {"units": "electron", "long_name": "read noise rms per pixel"}),
-                "signal": ("signal", signal, {"units": "photon", "long_name": "detected photons per lucky frame"})},
+        coords={
+            **case_coords(settings, datasets),
+            "criterion": ("criterion", criteria, {"long_name": "selection criterion"}),
+            "fraction": ("fraction", fractions, {"units": "1", "long_name": "fraction of frames selected"}),
+            "read_noise": ("read_noise", read_noise, {"units": "electron", "long_name": "read noise rms per pixel"}),
+            "signal": ("signal", signal, {"units": "photon", "long_name": "detected photons per lucky frame"}),
+        },
         attrs={"metric": metric},
     )
 
@@ -77,34 +115,54 @@ def draw_quality_vs_signal(ds: xr.Dataset, title: str):
             for case in ds.case.values:
                 ls = AO_STYLE[str(ds.ao_mode.sel(case=case).values)]
                 for k, criterion in enumerate(ds.criterion.values):
-                    cell = ds.sel(case=case, criterion=criterion, fraction=fraction, read_noise=read_noise,
-                                  registration=method)
+                    cell = ds.sel(
+                        case=case, criterion=criterion, fraction=fraction, read_noise=read_noise, registration=method
+                    )
                     y = cell[metric].values.astype(float)
                     if flag in cell:
                         y = np.where(cell[flag].values.astype(bool), np.nan, y)
-                    ax.plot(ds.signal, y, marker=MARKERS[k % 8], ms=3.5, color=colour(k), ls=ls,
-                            label=f"{cell.label.values}, by {CRITERIA.get(criterion, criterion)}")
+                    ax.plot(
+                        ds.signal,
+                        y,
+                        marker=MARKERS[k % 8],
+                        ms=3.5,
+                        color=colour(k),
+                        ls=ls,
+                        label=f"{cell.label.values}, by {CRITERIA.get(criterion, criterion)}",
+                    )
                     if f"{metric}_error" in cell:  # the band of the points drawn
                         error = cell[f"{metric}_error"].values
                         ax.fill_between(ds.signal.values, y - error, y + error, color=colour(k), alpha=0.18, lw=0)
                     if f"{metric}_noiseless_detector" in ds:
-                        ax.axhline(float(cell[f"{metric}_noiseless_detector"]), color=colour(k), lw=0.6, ls=ls,
-                                   alpha=0.6)
+                        ax.axhline(
+                            float(cell[f"{metric}_noiseless_detector"]), color=colour(k), lw=0.6, ls=ls, alpha=0.6
+                        )
             ax.set_xscale("log")
             ax.set_xlabel("detected photons per frame")
             ax.set_ylabel(METRICS[metric])
-            ax.set_title(f"({chr(ord('a') + r * n_cols + f)}) {method}, read noise {read_noise:g} e-, "
-                         f"{100 * fraction:g} % of frames", loc="left", fontsize=9)
+            ax.set_title(
+                f"({chr(ord('a') + r * n_cols + f)}) {method}, read noise {read_noise:g} e-, "
+                f"{100 * fraction:g} % of frames",
+                loc="left",
+                fontsize=9,
+            )
             ax.grid(alpha=0.3)
     # the axis spans the values the noise leaves alone: at a few photons the recentring fails
     # and the images blur far off the scale (arcsec)
-    settled = [ds[metric].isel(signal=-1).max()] + ([ds[f"{metric}_noiseless_detector"].max()]
-                                                    if f"{metric}_noiseless_detector" in ds else [])
+    settled = [ds[metric].isel(signal=-1).max()] + (
+        [ds[f"{metric}_noiseless_detector"].max()] if f"{metric}_noiseless_detector" in ds else []
+    )
     axes[0, 0].set_ylim(0.0, 1.5 * float(max(settled)))
-    fig.legend(*axes[0, 0].get_legend_handles_labels(), loc="outside lower center", ncol=3, fontsize=8,
-               title="colour: selection criterion; line style: case; thin horizontal lines: noiseless detector\n"
-                     f"bands: ±1 Monte-Carlo standard error; points more than {NOISE_DOMINATED:.0%} off the same "
-                     "selection on the noiseless frames\nare noise-dominated and left out; values above the axis: blurred "
-                     "by recentring on noise", title_fontsize=8)
+    fig.legend(
+        *axes[0, 0].get_legend_handles_labels(),
+        loc="outside lower center",
+        ncol=3,
+        fontsize=8,
+        title="colour: selection criterion; line style: case; thin horizontal lines: noiseless detector\n"
+        f"bands: ±1 Monte-Carlo standard error; points more than {NOISE_DOMINATED:.0%} off the same "
+        "selection on the noiseless frames\nare noise-dominated and left out; values above the axis: blurred "
+        "by recentring on noise",
+        title_fontsize=8,
+    )
     fig.suptitle(f"{title}: integrated-image {METRICS[metric]} vs signal per frame")
     return fig

@@ -19,8 +19,13 @@ METRICS = {
     "fwhm_arcsec": "FWHM [arcsec]",
     "d50_arcsec": "50% energy diameter [arcsec]",
 }
-CRITERIA = {"strehl": "image Strehl", "d50": "50%-energy diameter", "lgs_rms": "LGS rms",
-            "lgs_residual_rms": "LGS pseudo-closed-loop rms", "true_rms": "true rms (oracle)"}
+CRITERIA = {
+    "strehl": "image Strehl",
+    "d50": "50%-energy diameter",
+    "lgs_rms": "LGS rms",
+    "lgs_residual_rms": "LGS pseudo-closed-loop rms",
+    "true_rms": "true rms (oracle)",
+}
 
 
 def colour(k: int) -> str:
@@ -52,5 +57,15 @@ def series_fraction_lines(ax, x, ds, metric: str) -> None:
         for k, fraction in enumerate(ds.fraction.values):
             cell = ds.sel(series=series, fraction=fraction)
             error = cell[f"{metric}_error"].values if f"{metric}_error" in cell else None
-            ax.errorbar(x, cell[metric].values, yerr=error, color=colour(s), ls=LINE_STYLES[k % 4],
-                        marker=MARKERS[k % 8], ms=4, capsize=2, lw=1.2, label=f"{series}, {100 * fraction:g} %")
+            ax.errorbar(
+                x,
+                cell[metric].values,
+                yerr=error,
+                color=colour(s),
+                ls=LINE_STYLES[k % 4],
+                marker=MARKERS[k % 8],
+                ms=4,
+                capsize=2,
+                lw=1.2,
+                label=f"{series}, {100 * fraction:g} %",
+            )

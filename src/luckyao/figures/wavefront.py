@@ -27,8 +27,8 @@ def asterism_data(settings: FigureSettings, datasets=()) -> xr.Dataset:
         lgs, d_m, target = case.lgs, case.telescope.diameter_m, case.targets[0]
         for k, h in enumerate(heights):
             footprints = [LineOfSight(*direction, lgs.height_m) for direction in lgs.directions_rad]
-            centre[c, k, :lgs.n_beacons] = [footprint_centre_m(los, h) for los in footprints]
-            diameter[c, k, :lgs.n_beacons] = d_m * footprint_scale(h, lgs.height_m)
+            centre[c, k, : lgs.n_beacons] = [footprint_centre_m(los, h) for los in footprints]
+            diameter[c, k, : lgs.n_beacons] = d_m * footprint_scale(h, lgs.height_m)
             coverage[c, k] = footprint_coverage(d_m, target, footprints, h)
     dims = ("case", "layer_height_m", "beacon")
     return xr.Dataset(
@@ -36,20 +36,33 @@ def asterism_data(settings: FigureSettings, datasets=()) -> xr.Dataset:
             "footprint_x_m": (dims, centre[..., 0], {"units": "m", "long_name": "beacon footprint centre x"}),
             "footprint_y_m": (dims, centre[..., 1], {"units": "m", "long_name": "beacon footprint centre y"}),
             "footprint_diameter_m": (dims, diameter, {"units": "m", "long_name": "beacon footprint diameter"}),
-            "target_coverage": (("case", "layer_height_m"), coverage,
-                                {"units": "1", "long_name": "fraction of the target footprint seen by a beacon"}),
-            "beacon_height_m": ("case", [c.lgs.height_m for c in cases],
-                                {"units": "m", "long_name": "beacon height"}),
-            "telescope_diameter_m": ((), cases[0].telescope.diameter_m,
-                                     {"units": "m", "long_name": "telescope diameter"}),
-            "target_x_m": (("case", "layer_height_m"), np.outer([c.targets[0].theta_x_rad for c in cases], heights),
-                           {"units": "m", "long_name": "target footprint centre x"}),
-            "target_y_m": (("case", "layer_height_m"), np.outer([c.targets[0].theta_y_rad for c in cases], heights),
-                           {"units": "m", "long_name": "target footprint centre y"}),
+            "target_coverage": (
+                ("case", "layer_height_m"),
+                coverage,
+                {"units": "1", "long_name": "fraction of the target footprint seen by a beacon"},
+            ),
+            "beacon_height_m": ("case", [c.lgs.height_m for c in cases], {"units": "m", "long_name": "beacon height"}),
+            "telescope_diameter_m": (
+                (),
+                cases[0].telescope.diameter_m,
+                {"units": "m", "long_name": "telescope diameter"},
+            ),
+            "target_x_m": (
+                ("case", "layer_height_m"),
+                np.outer([c.targets[0].theta_x_rad for c in cases], heights),
+                {"units": "m", "long_name": "target footprint centre x"},
+            ),
+            "target_y_m": (
+                ("case", "layer_height_m"),
+                np.outer([c.targets[0].theta_y_rad for c in cases], heights),
+                {"units": "m", "long_name": "target footprint centre y"},
+            ),
         },
-        coords={"case": ("case", list(settings.cases), {"long_name": "case"}),
-                "layer_height_m": ("layer_height_m", heights, {"units": "m", "long_name": "layer height"}),
-                "beacon": ("beacon", np.arange(n_beacons), {"long_name": "beacon index"})},
+        coords={
+            "case": ("case", list(settings.cases), {"long_name": "case"}),
+            "layer_height_m": ("layer_height_m", heights, {"units": "m", "long_name": "layer height"}),
+            "beacon": ("beacon", np.arange(n_beacons), {"long_name": "beacon index"}),
+        },
     )
 
 
@@ -63,18 +76,29 @@ def draw_asterism(ds: xr.Dataset, title: str):
         for k in range(n_height):
             ax = axes[c, k]
             cell = ds.isel(case=c, layer_height_m=k)
-            ax.add_patch(Circle((float(cell.target_x_m), float(cell.target_y_m)), d_m / 2, fill=False,
-                                color="k", lw=1.5, ls="--"))
+            ax.add_patch(
+                Circle(
+                    (float(cell.target_x_m), float(cell.target_y_m)), d_m / 2, fill=False, color="k", lw=1.5, ls="--"
+                )
+            )
             for b in range(ds.sizes["beacon"]):
                 if np.isfinite(cell.footprint_diameter_m[b]):
-                    ax.add_patch(Circle((float(cell.footprint_x_m[b]), float(cell.footprint_y_m[b])),
-                                        float(cell.footprint_diameter_m[b]) / 2, alpha=0.3, color=colour(b)))
+                    ax.add_patch(
+                        Circle(
+                            (float(cell.footprint_x_m[b]), float(cell.footprint_y_m[b])),
+                            float(cell.footprint_diameter_m[b]) / 2,
+                            alpha=0.3,
+                            color=colour(b),
+                        )
+                    )
             ax.set_xlim(-limit, limit)
             ax.set_ylim(-limit, limit)
             ax.set_aspect("equal")
-            ax.set_title(f"({chr(ord('a') + c)}) H = {float(cell.beacon_height_m) / 1e3:.0f} km, "
-                         f"h = {float(cell.layer_height_m) / 1e3:.2f} km\ncovered {100 * float(cell.target_coverage):.0f}%",
-                         fontsize=8)
+            ax.set_title(
+                f"({chr(ord('a') + c)}) H = {float(cell.beacon_height_m) / 1e3:.0f} km, "
+                f"h = {float(cell.layer_height_m) / 1e3:.2f} km\ncovered {100 * float(cell.target_coverage):.0f}%",
+                fontsize=8,
+            )
             ax.set_xlabel("x [m]")
             ax.set_ylabel("y [m]")
     fig.suptitle(f"{title}: LGS footprints (a colour per beacon) and the target's (dashed)")
@@ -97,13 +121,21 @@ def rms_truth_data(settings: FigureSettings, datasets) -> xr.Dataset:
         {
             "lgs_rms_nm": (("case", "frame"), lgs, dict(datasets[0]["lgs_rms_nm"].attrs)),
             "true_rms_nm": (("case", "frame"), true, dict(datasets[0]["true_rms_nm"].attrs)),
-            "pearson": ("case", pairs[:, 0],
-                        {"units": "1", "long_name": "Pearson correlation of lgs_rms_nm and true_rms_nm"}),
-            "spearman": ("case", pairs[:, 1],
-                         {"units": "1", "long_name": "rank correlation of lgs_rms_nm and true_rms_nm"}),
+            "pearson": (
+                "case",
+                pairs[:, 0],
+                {"units": "1", "long_name": "Pearson correlation of lgs_rms_nm and true_rms_nm"},
+            ),
+            "spearman": (
+                "case",
+                pairs[:, 1],
+                {"units": "1", "long_name": "rank correlation of lgs_rms_nm and true_rms_nm"},
+            ),
         },
-        coords={**case_coords(settings, datasets),
-                "time_s": ("frame", datasets[0]["time_s"].values, {"units": "s", "long_name": "frame start time"})},
+        coords={
+            **case_coords(settings, datasets),
+            "time_s": ("frame", datasets[0]["time_s"].values, {"units": "s", "long_name": "frame start time"}),
+        },
     )
 
 
@@ -112,8 +144,14 @@ def draw_rms_truth(ds: xr.Dataset, title: str):
     scatter, series = fig.subplots(1, 2)
     for i, case in enumerate(ds.case.values):
         row = ds.sel(case=case)
-        scatter.plot(row.true_rms_nm, row.lgs_rms_nm, ".", ms=2, color=colour(i),
-                     label=f"{row.label.values}: r = {float(row.pearson):.3f}, rank r = {float(row.spearman):.3f}")
+        scatter.plot(
+            row.true_rms_nm,
+            row.lgs_rms_nm,
+            ".",
+            ms=2,
+            color=colour(i),
+            label=f"{row.label.values}: r = {float(row.pearson):.3f}, rank r = {float(row.spearman):.3f}",
+        )
         series.plot(ds.time_s, row.lgs_rms_nm, lw=0.8, color=colour(i), label=str(row.label.values))
     series.plot(ds.time_s, ds.true_rms_nm.isel(case=0), lw=1.2, color="k", label="true")
     scatter.set_xlabel("true tilt-removed rms along the target [nm]")
@@ -133,31 +171,52 @@ def residuals_data(settings: FigureSettings, datasets) -> xr.Dataset:
     true corrected rms, with the correlations of each estimate with the truth, and of the
     pseudo-closed-loop rms with the open-loop rms (the paper: highly correlated, the
     residual consistently lower)."""
-    series = {name: np.stack([ds[name].isel(target=0).values for ds in datasets])
-              for name in ("lgs_rms_nm", "lgs_residual_rms_nm", "true_rms_nm")}
+    series = {
+        name: np.stack([ds[name].isel(target=0).values for ds in datasets])
+        for name in ("lgs_rms_nm", "lgs_residual_rms_nm", "true_rms_nm")
+    }
     estimates = ["lgs_rms_nm", "lgs_residual_rms_nm"]
-    pairs = np.array([[_correlations(series[e][c], series["true_rms_nm"][c]) for e in estimates]
-                      for c in range(len(datasets))])  # (case, estimate, kind)
-    open_loop = np.array([_correlations(series["lgs_residual_rms_nm"][c], series["lgs_rms_nm"][c])
-                          for c in range(len(datasets))])  # (case, kind)
+    pairs = np.array(
+        [[_correlations(series[e][c], series["true_rms_nm"][c]) for e in estimates] for c in range(len(datasets))]
+    )  # (case, estimate, kind)
+    open_loop = np.array(
+        [_correlations(series["lgs_residual_rms_nm"][c], series["lgs_rms_nm"][c]) for c in range(len(datasets))]
+    )  # (case, kind)
     lower = (series["lgs_residual_rms_nm"] < series["lgs_rms_nm"]).mean(axis=1)
     return xr.Dataset(
         {
             **{name: (("case", "frame"), values, dict(datasets[0][name].attrs)) for name, values in series.items()},
-            "pearson": (("case", "estimate"), pairs[..., 0],
-                        {"units": "1", "long_name": "Pearson correlation with true_rms_nm"}),
-            "spearman": (("case", "estimate"), pairs[..., 1],
-                         {"units": "1", "long_name": "rank correlation with true_rms_nm"}),
-            "pearson_open_loop": (("case",), open_loop[:, 0], {
-                "units": "1", "long_name": "Pearson correlation of lgs_residual_rms_nm with lgs_rms_nm"}),
-            "spearman_open_loop": (("case",), open_loop[:, 1], {
-                "units": "1", "long_name": "rank correlation of lgs_residual_rms_nm with lgs_rms_nm"}),
-            "residual_lower_fraction": (("case",), lower, {
-                "units": "1", "long_name": "fraction of frames whose lgs_residual_rms_nm is below lgs_rms_nm"}),
+            "pearson": (
+                ("case", "estimate"),
+                pairs[..., 0],
+                {"units": "1", "long_name": "Pearson correlation with true_rms_nm"},
+            ),
+            "spearman": (
+                ("case", "estimate"),
+                pairs[..., 1],
+                {"units": "1", "long_name": "rank correlation with true_rms_nm"},
+            ),
+            "pearson_open_loop": (
+                ("case",),
+                open_loop[:, 0],
+                {"units": "1", "long_name": "Pearson correlation of lgs_residual_rms_nm with lgs_rms_nm"},
+            ),
+            "spearman_open_loop": (
+                ("case",),
+                open_loop[:, 1],
+                {"units": "1", "long_name": "rank correlation of lgs_residual_rms_nm with lgs_rms_nm"},
+            ),
+            "residual_lower_fraction": (
+                ("case",),
+                lower,
+                {"units": "1", "long_name": "fraction of frames whose lgs_residual_rms_nm is below lgs_rms_nm"},
+            ),
         },
-        coords={**case_coords(settings, datasets),
-                "estimate": ("estimate", estimates, {"long_name": "LGS estimate of the residual"}),
-                "time_s": ("frame", datasets[0]["time_s"].values, {"units": "s", "long_name": "frame start time"})},
+        coords={
+            **case_coords(settings, datasets),
+            "estimate": ("estimate", estimates, {"long_name": "LGS estimate of the residual"}),
+            "time_s": ("frame", datasets[0]["time_s"].values, {"units": "s", "long_name": "frame start time"}),
+        },
         attrs={"window_s": settings.window_s},
     )
 
@@ -175,8 +234,14 @@ def draw_residuals(ds: xr.Dataset, title: str):
         for k, (name, label) in enumerate(names.items()):
             r = row.sel(estimate=name)
             series.plot(ds.time_s[shown], row[name][shown], color=colour(k), lw=0.9, label=label)
-            scatter.plot(row.true_rms_nm, row[name], ".", ms=2, color=colour(k),
-                         label=f"{label}: r = {float(r.pearson):.2f}, rank r = {float(r.spearman):.2f}")
+            scatter.plot(
+                row.true_rms_nm,
+                row[name],
+                ".",
+                ms=2,
+                color=colour(k),
+                label=f"{label}: r = {float(r.pearson):.2f}, rank r = {float(r.spearman):.2f}",
+            )
         series.set_title(f"({chr(ord('a') + c)}) {row.summary.values}", loc="left", fontsize=9)
         series.set_xlabel("time [s]")
         series.set_ylabel("tilt-removed rms along the target [nm]")

@@ -39,9 +39,12 @@ def code_version() -> str:
     that tree has uncommitted changes (``git`` absent or no checkout: the version alone)."""
     source = Path(__file__).resolve().parents[1]
     try:
+
         def git(*args):
-            return subprocess.run(["git", "-C", str(source), *args], capture_output=True, text=True,
-                                  timeout=10, check=True).stdout.strip()
+            return subprocess.run(
+                ["git", "-C", str(source), *args], capture_output=True, text=True, timeout=10, check=True
+            ).stdout.strip()
+
         commit = git("rev-parse", "HEAD")
         dirty = bool(git("status", "--porcelain", "--untracked-files=no", "--", "."))
     except (OSError, subprocess.SubprocessError):
@@ -52,11 +55,18 @@ def code_version() -> str:
 def provenance(title: str, config: dict, seed: int) -> dict:
     """Global attributes: the config as JSON, its sha256, code version, seed, and the
     versions of every library that shapes the numbers."""
-    libraries = {"python": platform.python_version(), "numpy": np.__version__, "scipy": version("scipy"),
-                 "numba": version("numba"), "pyfftw": version("pyFFTW"), "xarray": xr.__version__,
-                 "netCDF4": netCDF4.__version__, "netcdf_library": netCDF4.__netcdf4libversion__,
-                 "hdf5_library": netCDF4.__hdf5libversion__,
-                 "openblas_coretype": os.environ.get("OPENBLAS_CORETYPE", "auto")}
+    libraries = {
+        "python": platform.python_version(),
+        "numpy": np.__version__,
+        "scipy": version("scipy"),
+        "numba": version("numba"),
+        "pyfftw": version("pyFFTW"),
+        "xarray": xr.__version__,
+        "netCDF4": netCDF4.__version__,
+        "netcdf_library": netCDF4.__netcdf4libversion__,
+        "hdf5_library": netCDF4.__hdf5libversion__,
+        "openblas_coretype": os.environ.get("OPENBLAS_CORETYPE", "auto"),
+    }
     return {
         "Conventions": "CF-1.8",
         "title": title,
@@ -77,7 +87,9 @@ def require_finite(values, what: str, variable: str, index_names=()) -> None:
     finite = np.isfinite(values)
     if not finite.all():
         index = np.unravel_index(np.argmin(finite), np.shape(values))
-        where = ", ".join(f"{n}={i}" for n, i in zip(index_names, index)) if index_names else str(tuple(map(int, index)))
+        where = (
+            ", ".join(f"{n}={i}" for n, i in zip(index_names, index)) if index_names else str(tuple(map(int, index)))
+        )
         raise ValueError(f"{what}: variable '{variable}' is not finite at {where}")
 
 
@@ -108,8 +120,11 @@ def require_finite_lucky(ds: xr.Dataset, what: str) -> None:
     positive flux (a few photons under read noise): its metrics are undefined (NaN), per
     frame (``frame_*``) or integrated. Nothing else may be NaN: every value of the
     noiseless detectors and every variable without a detector."""
-    noisy = (np.isfinite(ds["photons_per_frame"].values) if "photons_per_frame" in ds.coords
-             else np.zeros(ds.sizes.get("detector", 0), bool))
+    noisy = (
+        np.isfinite(ds["photons_per_frame"].values)
+        if "photons_per_frame" in ds.coords
+        else np.zeros(ds.sizes.get("detector", 0), bool)
+    )
     for name, var in ds.data_vars.items():
         if var.dtype.kind != "f" or name.startswith("frame_"):
             continue
@@ -217,8 +232,7 @@ class FrameWriter:
     name only when the block closes without error.
     """
 
-    def __init__(self, path, targets, n_frames: int, n_pixels: int,
-                 pixel_scale_arcsec: float, attrs: dict):
+    def __init__(self, path, targets, n_frames: int, n_pixels: int, pixel_scale_arcsec: float, attrs: dict):
         self._atomic = atomic_path(path)
         self._atomic_target = path
         self._targets = list(targets)  # the case's indices of the targets stored
@@ -241,8 +255,7 @@ class FrameWriter:
             coord[:] = (np.arange(n) - n // 2) * self._pixel_scale
             coord.units = "arcsec"
             coord.long_name = f"{axis} position on the sky relative to the optical axis"
-        self.frames = self._nc.createVariable(
-            "frames", "f4", ("target", "frame", "y", "x"), chunksizes=(1, 1, n, n))
+        self.frames = self._nc.createVariable("frames", "f4", ("target", "frame", "y", "x"), chunksizes=(1, 1, n, n))
         self.frames.units = "1"
         self.frames.long_name = "noiseless lucky-camera frame, unit total flux"
         return self
@@ -254,7 +267,7 @@ class FrameWriter:
         except ValueError as err:
             raise ValueError(f"{err} (block from frame {start})") from None
         try:
-            self.frames[:, start:start + block.shape[1]] = block
+            self.frames[:, start : start + block.shape[1]] = block
         except (OSError, RuntimeError) as err:
             raise write_failure(self._atomic_target, self._partial, err) from err
 
@@ -288,10 +301,11 @@ def iter_frame_blocks(path, target: int, block: int = 64):
             row = stored.index(target)
             for start in range(0, frames.shape[1], block):
                 try:
-                    frames_block = np.asarray(frames[row, start:start + block], dtype=np.float32)
+                    frames_block = np.asarray(frames[row, start : start + block], dtype=np.float32)
                 except (OSError, RuntimeError, IndexError) as err:
-                    raise OSError(set_aside(path, f"frames file '{path}' is unreadable from frame {start} ({err})")) \
-                        from err
+                    raise OSError(
+                        set_aside(path, f"frames file '{path}' is unreadable from frame {start} ({err})")
+                    ) from err
                 try:
                     require_finite(frames_block, f"frames file '{path}'", "frames", ("frame", "y", "x"))
                 except ValueError as err:

@@ -41,17 +41,23 @@ def _wcs_cards(lucky: xr.Dataset, pixel_scale_arcsec: float) -> list[tuple]:
     cards = [("WCSAXES", 2, "")]
     for axis, name in ((1, "x"), (2, "y")):
         axis_pixel = int(np.flatnonzero(lucky[name].values == 0)[0]) + 1
-        cards += [(f"CTYPE{axis}", f"{name.upper()}OFFSET", "offset from the optical axis"),
-                  (f"CUNIT{axis}", "arcsec", ""),
-                  (f"CRPIX{axis}", float(axis_pixel), "the optical axis pixel (1-based)"),
-                  (f"CRVAL{axis}", 0.0, ""), (f"CDELT{axis}", pixel_scale_arcsec, "[arcsec] pixel scale")]
+        cards += [
+            (f"CTYPE{axis}", f"{name.upper()}OFFSET", "offset from the optical axis"),
+            (f"CUNIT{axis}", "arcsec", ""),
+            (f"CRPIX{axis}", float(axis_pixel), "the optical axis pixel (1-based)"),
+            (f"CRVAL{axis}", 0.0, ""),
+            (f"CDELT{axis}", pixel_scale_arcsec, "[arcsec] pixel scale"),
+        ]
     return cards + [("PIXSCALE", pixel_scale_arcsec, "[arcsec/pixel]")]
 
 
 def _quality_cards(values: xr.Dataset, prefix: str = "") -> list[tuple]:
     """Strehl, FWHM, d50 of an image (and their errors when known), from ``values``."""
-    names = (("STREHL", "strehl", "Strehl ratio"), ("FWHM", "fwhm_arcsec", "[arcsec] FWHM"),
-             ("D50", "d50_arcsec", "[arcsec] 50%-energy diameter"))
+    names = (
+        ("STREHL", "strehl", "Strehl ratio"),
+        ("FWHM", "fwhm_arcsec", "[arcsec] FWHM"),
+        ("D50", "d50_arcsec", "[arcsec] 50%-energy diameter"),
+    )
     cards = []
     for key, name, comment in names:
         if f"{prefix}{name}" in values:
@@ -76,33 +82,42 @@ def image_hdus(lucky: xr.Dataset, detectors=None):
     common = _provenance_cards(lucky) + _wcs_cards(lucky, float(lucky.attrs["pixel_scale_arcsec"]))
     for t in range(lucky.sizes["target"]):
         target = lucky.isel(target=t)
-        where = [("TARGET", t, "target index"),
-                 ("TARGETX", float(target.target_x_arcsec), "[arcsec] target direction x"),
-                 ("TARGETY", float(target.target_y_arcsec), "[arcsec] target direction y")]
+        where = [
+            ("TARGET", t, "target index"),
+            ("TARGETX", float(target.target_x_arcsec), "[arcsec] target direction x"),
+            ("TARGETY", float(target.target_y_arcsec), "[arcsec] target direction y"),
+        ]
         for detector in detectors:
             det = target.sel(detector=detector)
             photons = float(det.photons_per_frame)
-            noise = [("DETECTOR", str(detector), "detector model"),
-                     ("PHOTONS", photons if np.isfinite(photons) else "none", "detected photons per frame"),
-                     ("RDNOISE", float(det.read_noise_e), "[e-] read noise rms per pixel")]
+            noise = [
+                ("DETECTOR", str(detector), "detector model"),
+                ("PHOTONS", photons if np.isfinite(photons) else "none", "detected photons per frame"),
+                ("RDNOISE", float(det.read_noise_e), "[e-] read noise rms per pixel"),
+            ]
             for criterion in lucky.criterion.values:
                 for fraction in lucky.fraction.values:
                     cell = det.sel(criterion=criterion, fraction=fraction)
-                    cards = [("IMAGETYP", "lucky", "shift-and-add of the selected frames"),
-                             ("CRITERIO", str(criterion), "frame selection criterion"),
-                             ("FRACTION", float(fraction), "fraction of frames selected")]
+                    cards = [
+                        ("IMAGETYP", "lucky", "shift-and-add of the selected frames"),
+                        ("CRITERIO", str(criterion), "frame selection criterion"),
+                        ("FRACTION", float(fraction), "fraction of frames selected"),
+                    ]
                     name = f"LUCKY_T{t}_{criterion}_{fraction:g}_{detector}".upper()
                     yield _hdu(fits, cell.image.values, name, common + where + noise + cards + _quality_cards(cell))
             for recentring in lucky.recentring.values:
                 cell = det.sel(recentring=recentring)
-                cards = [("IMAGETYP", "long exposure", "all frames"),
-                         ("RECENTR", str(recentring), "none, or cog: each frame recentred on its centroid")]
+                cards = [
+                    ("IMAGETYP", "long exposure", "all frames"),
+                    ("RECENTR", str(recentring), "none, or cog: each frame recentred on its centroid"),
+                ]
                 quality = _quality_cards(cell, "long_exposure_")
                 if recentring == "none" and "long_exposure_strehl_error" in cell:
                     quality.append(("STREHLE", float(cell.long_exposure_strehl_error), "Monte-Carlo standard error"))
                 elif "recentred_long_exposure_strehl_error" in cell:
-                    quality.append(("STREHLE", float(cell.recentred_long_exposure_strehl_error),
-                                    "Monte-Carlo standard error"))
+                    quality.append(
+                        ("STREHLE", float(cell.recentred_long_exposure_strehl_error), "Monte-Carlo standard error")
+                    )
                 name = f"LONG_T{t}_{recentring}_{detector}".upper()
                 yield _hdu(fits, cell.long_exposure_image.values, name, common + where + noise + cards + quality)
 

@@ -4,6 +4,7 @@ keys, dataset provenance)."""
 import hashlib
 import json
 
+
 def canonical_json(value) -> str:
     """Key-sorted compact JSON: the text that is hashed and stored."""
     return json.dumps(value, sort_keys=True, separators=(",", ":"))

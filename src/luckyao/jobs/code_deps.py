@@ -40,7 +40,7 @@ def _imported_modules(path: Path, module: str) -> set[str]:
             found |= {alias.name for alias in node.names if alias.name.split(".")[0] == "luckyao"}
         elif isinstance(node, ast.ImportFrom):
             if node.level:
-                base = package.split(".")[:len(package.split(".")) - node.level + 1]
+                base = package.split(".")[: len(package.split(".")) - node.level + 1]
                 target = ".".join(base + ([node.module] if node.module else []))
             elif (node.module or "").split(".")[0] == "luckyao":
                 target = node.module

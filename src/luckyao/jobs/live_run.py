@@ -91,8 +91,10 @@ def clean_if_idle(folder: Path, echo=print) -> int:
     try:
         fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
     except BlockingIOError:
-        echo(f"luckyao: a run of the workflow, or a job of a killed one still running, is using {folder}; "
-             "its lock and files are left alone")
+        echo(
+            f"luckyao: a run of the workflow, or a job of a killed one still running, is using {folder}; "
+            "its lock and files are left alone"
+        )
         fcntl.flock(fd, fcntl.LOCK_SH)
         return fd
     locks = [p for p in (folder / ".snakemake" / "locks").glob("*") if p.is_file()]

@@ -4,42 +4,42 @@ so that no name can add markup (a directive, a role, raw HTML) to ``report.html`
 
 import re
 
-from ..studyspec.case import Case
 from ..figures.settings import CaseSummary
+from ..studyspec.case import Case
 
 KINDS = {
     "quality_vs_fraction": "Integrated-image quality (Strehl ratio, FWHM, 50%-energy diameter) vs the fraction of "
-                           "frames selected, a row of panels per selection criterion, a colour per case; dotted: "
-                           "the long exposure without recentring.",
+    "frames selected, a row of panels per selection criterion, a colour per case; dotted: "
+    "the long exposure without recentring.",
     "quality_vs_parameter": "Integrated-image quality vs a swept parameter, a row per selection criterion, a colour "
-                            "per value of the sweep's other parameters, a line style per fraction selected.",
+    "per value of the sweep's other parameters, a line style per fraction selected.",
     "quality_vs_diameter": "Integrated-image Strehl ratio and 50%-energy diameter vs the telescope diameter, a row per "
-                           "selection criterion, a colour per AO mode and beacon height, a line style per fraction "
-                           "selected; and the probability of a lucky frame (short-exposure Strehl above a threshold).",
+    "selection criterion, a colour per AO mode and beacon height, a line style per fraction "
+    "selected; and the probability of a lucky frame (short-exposure Strehl above a threshold).",
     "quality_vs_signal": "Integrated-image quality vs detected photons per lucky frame (the detector sweep: Poisson "
-                         "photon noise and Gaussian read noise), a row per read noise and a column per fraction "
-                         "selected; the noiseless detector's value for reference; noise-dominated points (more than "
-                         "30 % off the same selection on the noiseless frames) are left out.",
+    "photon noise and Gaussian read noise), a row per read noise and a column per fraction "
+    "selected; the noiseless detector's value for reference; noise-dominated points (more than "
+    "30 % off the same selection on the noiseless frames) are left out.",
     "registration": "Integrated-image Strehl ratio and 50%-energy diameter vs detected photons per lucky frame "
-                    "(the detector sweep) for every registration method (colour), selection criterion (line "
-                    "style), read noise (rows) and case (columns), the top axis in I magnitude (4.2 m, 100 Hz); "
-                    "its dataset holds each curve's knee (luckyao knees).",
+    "(the detector sweep) for every registration method (colour), selection criterion (line "
+    "style), read noise (rows) and case (columns), the top axis in I magnitude (4.2 m, 100 Hz); "
+    "its dataset holds each curve's knee (luckyao knees).",
     "quality_vs_distance": "Integrated-image quality vs the target's off-axis distance in the field, a row per "
-                           "selection criterion, a colour per case and a line style per fraction selected.",
+    "selection criterion, a colour per case and a line style per fraction selected.",
     "psf_gallery": "The images themselves: each case's long exposure beside its lucky images (shift-and-add of the "
-                   "selected frames), on one logarithmic scale in units of the diffraction-limited peak.",
+    "selected frames), on one logarithmic scale in units of the diffraction-limited peak.",
     "comparisons": "Paired differences a - b of integrated-image quality vs fraction, with paired (shared "
-                   "turbulence) and unpaired Monte-Carlo errors.",
+    "turbulence) and unpaired Monte-Carlo errors.",
     "long_exposure_check": "Simulated long-exposure Strehl ratio (all frames, no recentring, with its Monte-Carlo "
-                           "error) beside the analytic value, telescope OTF times exp(-D/2).",
+    "error) beside the analytic value, telescope OTF times exp(-D/2).",
     "long_exposure_table": "A table of every case's long-exposure Strehl ratio (all frames) without and with "
-                           "recentring, each with its Monte-Carlo error (batch means over time blocks).",
+    "recentring, each with its Monte-Carlo error (batch means over time blocks).",
     "asterism": "The LGS pupil footprints (cone effect) at several layer heights, with the fraction of the target's "
-                "footprint they cover.",
+    "footprint they cover.",
     "rms_truth": "Per frame, the LGS-reconstructed tilt-removed rms along the target vs the true one, with their "
-                 "correlation.",
+    "correlation.",
     "residuals": "Time series of the open-loop and pseudo-closed-loop reconstructed tilt-removed rms with the true "
-                 "corrected rms, and their correlations.",
+    "corrected rms, and their correlations.",
 }
 
 
@@ -55,8 +55,10 @@ def figure_caption(fig_id: str, figure: dict, study: dict, cases: dict) -> str:
     case in short; the provenance is added by the template from the figure's dataset."""
     settings = []
     if figure.get("sweep"):
-        settings.append(f"sweep {rst_text(figure['sweep'])}"
-                        + (f" along {rst_text(figure['parameter'])}" if figure.get("parameter") else ""))
+        settings.append(
+            f"sweep {rst_text(figure['sweep'])}"
+            + (f" along {rst_text(figure['parameter'])}" if figure.get("parameter") else "")
+        )
     if figure.get("criteria"):
         settings.append("selection by " + ", ".join(rst_text(c) for c in figure["criteria"]))
     if figure.get("fractions"):
@@ -69,9 +71,14 @@ def figure_caption(fig_id: str, figure: dict, study: dict, cases: dict) -> str:
         settings.append(f"metric {rst_text(figure['metric'])}")
     settings.append(f"seed {int(study['seed'])}")
     settings.append(f"{study['base']['duration_s']:g} s of telescope time per case unless it sets its own")
-    lines = [f"Figure **{rst_text(fig_id)}** ({rst_text(figure['kind'])}). "
-             + KINDS.get(figure["kind"], ""), "", f"**Settings**: {'; '.join(settings)}.", "",
-             f"**Cases** ({len(figure['cases'])}):", ""]
+    lines = [
+        f"Figure **{rst_text(fig_id)}** ({rst_text(figure['kind'])}). " + KINDS.get(figure["kind"], ""),
+        "",
+        f"**Settings**: {'; '.join(settings)}.",
+        "",
+        f"**Cases** ({len(figure['cases'])}):",
+        "",
+    ]
     for name in figure["cases"]:
         lines.append(f"- {rst_text(name)}: {rst_text(CaseSummary.of(name, Case.from_config(cases[name])).summary())}")
     return "\n".join(lines)

@@ -36,13 +36,21 @@ from pathlib import Path
 
 from ..clock import FrameClock, frame_count
 from ..steps.screens import TurbulenceSpec, strip_specs
+from ..studyspec.lucky import lucky_settings, registrations
+from ..studyspec.products import (
+    commands_key,
+    commands_spec,
+    reconstructor_key,
+    reconstructor_spec,
+    slopes_key,
+    slopes_spec,
+    turbulence_key,
+    turbulence_spec,
+)
+from ..studyspec.resolved import imaged_targets
 from ..studyspec.schema import ConfigError
 from ..studyspec.study import validate_study
 from ..studyspec.sweeps import expand_sweeps
-from ..studyspec.products import (commands_key, commands_spec, reconstructor_key, reconstructor_spec, slopes_key,
-                             slopes_spec, turbulence_key, turbulence_spec)
-from ..studyspec.resolved import imaged_targets
-from ..studyspec.lucky import lucky_settings, registrations
 
 BASE_BYTES = 0.4e9
 """Python with numpy, scipy, numba and pyFFTW loaded."""
@@ -166,21 +174,33 @@ def study_jobs(study: dict, cases: dict) -> list[tuple[str, str, float, str | No
     for name, case in cases.items():
         spec = turbulence_spec(study, case)
         key = turbulence_key(spec)
-        add(f"turbulence {key}", name, turbulence_memory_bytes(spec), f"results/turbulence/{key}.npy",
-            screens_bytes(spec))
+        add(
+            f"turbulence {key}",
+            name,
+            turbulence_memory_bytes(spec),
+            f"results/turbulence/{key}.npy",
+            screens_bytes(spec),
+        )
         if (spec := reconstructor_spec(case)) is not None:
             key = reconstructor_key(spec)
-            add(f"reconstructor {key}", name, reconstructor_memory_bytes(spec), f"results/reconstructors/{key}.nc",
-                reconstructor_bytes(spec))
+            add(
+                f"reconstructor {key}",
+                name,
+                reconstructor_memory_bytes(spec),
+                f"results/reconstructors/{key}.nc",
+                reconstructor_bytes(spec),
+            )
         if (spec := commands_spec(case)) is not None:
             key = commands_key(spec)
-            add(f"commands {key}", name, commands_memory_bytes(spec), f"results/commands/{key}.nc",
-                commands_bytes(spec))
+            add(
+                f"commands {key}", name, commands_memory_bytes(spec), f"results/commands/{key}.nc", commands_bytes(spec)
+            )
         if (spec := slopes_spec(study, case)) is not None:
             key = slopes_key(spec)
             add(f"slopes {key}", name, slopes_memory_bytes(case), f"results/slopes/{key}.nc", slopes_bytes(case))
-        add(f"simulate {name}", name, simulate_memory_bytes(case), f"results/cases/{name}/frames.nc",
-            frames_bytes(case))
+        add(
+            f"simulate {name}", name, simulate_memory_bytes(case), f"results/cases/{name}/frames.nc", frames_bytes(case)
+        )
         add(f"lucky {name}", name, lucky_memory_bytes(lucky_settings(study, cases, name)), None, 0.0)
     return [(job, *values) for job, values in jobs.items()]
 
@@ -189,12 +209,18 @@ def machine_memory_bytes() -> float:
     return float(os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES"))
 
 
-FILE_KINDS = {"turbulence": "phase screens", "reconstructor": "reconstructors", "commands": "command matrices",
-              "slopes": "LGS slopes", "simulate": "frame cubes"}
+FILE_KINDS = {
+    "turbulence": "phase screens",
+    "reconstructor": "reconstructors",
+    "commands": "command matrices",
+    "slopes": "LGS slopes",
+    "simulate": "frame cubes",
+}
 
 
-def preflight(study: dict, cases: dict, folder=".", memory_bytes: float | None = None,
-              parallel_jobs: int = 1) -> list[str]:
+def preflight(
+    study: dict, cases: dict, folder=".", memory_bytes: float | None = None, parallel_jobs: int = 1
+) -> list[str]:
     """One problem per job whose memory estimate exceeds ``memory_bytes`` (default: this
     machine's), and one when the files of the study not yet made would together exceed the
     free disk of ``folder``: every product and, with ``keep_frames``, every frame cube, or
@@ -205,27 +231,34 @@ def preflight(study: dict, cases: dict, folder=".", memory_bytes: float | None =
     for job, case, memory, output, size in study_jobs(study, cases):
         if memory > memory_bytes:
             key = "turbulence" if job.startswith("turbulence ") else f"cases.{case}"  # screens: of every case
-            problems.append(f"config key '{key}': job {job} needs about {_gb(memory)} of memory, more than "
-                            f"the {_gb(memory_bytes)} available (this machine's memory, or --resources mem_mb=N if "
-                            "larger)")
+            problems.append(
+                f"config key '{key}': job {job} needs about {_gb(memory)} of memory, more than "
+                f"the {_gb(memory_bytes)} available (this machine's memory, or --resources mem_mb=N if "
+                "larger)"
+            )
         if output is not None and not (Path(folder) / output).exists():
             pending.append((job, case, output, size))
     keep_frames = study.get("keep_frames", False)
     kept = [p for p in pending if keep_frames or not p[0].startswith("simulate ")]
-    passing = sorted((p for p in pending if p not in kept), key=lambda p: p[3], reverse=True)[:max(1, parallel_jobs)]
+    passing = sorted((p for p in pending if p not in kept), key=lambda p: p[3], reverse=True)[: max(1, parallel_jobs)]
     needed = sum(p[3] for p in kept + passing)
     if needed > free_bytes:
         totals = {}
         for job, *_, size in kept + passing:
             totals[FILE_KINDS[job.split()[0]]] = totals.get(FILE_KINDS[job.split()[0]], 0.0) + size
         parts = ", ".join(f"{kind} {_gb(size)}" for kind, size in sorted(totals.items(), key=lambda t: -t[1]))
-        frames = ("every frame cube kept (keep_frames: true)" if keep_frames else
-                  f"the {len(passing)} largest frame cubes at once (each deleted once post-processed)")
+        frames = (
+            "every frame cube kept (keep_frames: true)"
+            if keep_frames
+            else f"the {len(passing)} largest frame cubes at once (each deleted once post-processed)"
+        )
         largest = max(kept + passing, key=lambda p: p[3])
-        problems.append(f"config key '{'keep_frames' if keep_frames else 'cases'}': the study's files not yet made "
-                        f"need about {_gb(needed)} together ({parts}; {frames}), more than the {_gb(free_bytes)} "
-                        f"free on the study folder's disk (the largest: {largest[2]} of case '{largest[1]}', "
-                        f"{_gb(largest[3])})")
+        problems.append(
+            f"config key '{'keep_frames' if keep_frames else 'cases'}': the study's files not yet made "
+            f"need about {_gb(needed)} together ({parts}; {frames}), more than the {_gb(free_bytes)} "
+            f"free on the study folder's disk (the largest: {largest[2]} of case '{largest[1]}', "
+            f"{_gb(largest[3])})"
+        )
     return problems
 
 
@@ -233,8 +266,9 @@ class StudyTooLarge(ConfigError):
     """A valid study whose jobs do not fit this machine's memory or the study folder's disk."""
 
 
-def checked_study(config: dict, folder=".", memory_bytes: float | None = None,
-                  parallel_jobs: int | None = None) -> tuple[dict, dict]:
+def checked_study(
+    config: dict, folder=".", memory_bytes: float | None = None, parallel_jobs: int | None = None
+) -> tuple[dict, dict]:
     """The one pre-flight of a study config, shared by ``luckyao check`` and the workflow (its
     dry run and every run), before any job: the config validated (``ConfigError``, one line per
     problem naming its key), then :func:`preflight` in ``folder`` (``StudyTooLarge``, one line

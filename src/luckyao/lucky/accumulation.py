@@ -114,8 +114,7 @@ class PartialSums:
     the first chunk gives the frame size and the largest chunk.
     """
 
-    def __init__(self, n_det: int, n_crit: int, counts: np.ndarray, blocks: TimeBlocks,
-                 resident: Sequence[int] = ()):
+    def __init__(self, n_det: int, n_crit: int, counts: np.ndarray, blocks: TimeBlocks, resident: Sequence[int] = ()):
         self.n_det, self.n_crit, self.blocks = n_det, n_crit, blocks
         self.n_bins = len(np.unique(counts))
         self.last_bin = last_bins(counts)
@@ -156,8 +155,7 @@ class PartialSums:
         """First row of criterion ``crit``'s bins in block ``block`` (broadcast arrays)."""
         n_bins = self.blocks.n_bins
         streamed = self.block_row0 + ((block % max(self.n_sets, 1)) * self.n_stream + self.slot[crit]) * n_bins
-        resident = (self.block_row0 + (self.n_sets * self.n_stream + block * self.n_resident + self.slot[crit])
-                    * n_bins)
+        resident = self.block_row0 + (self.n_sets * self.n_stream + block * self.n_resident + self.slot[crit]) * n_bins
         return np.where(self.is_resident[crit], resident, streamed)
 
     def block_rows(self, crits, sl: slice, bins: np.ndarray) -> np.ndarray:
@@ -179,7 +177,7 @@ class PartialSums:
             return
         for block in self.blocks.completed(sl.start, sl.stop):
             first = int(self.block_first_row(block, crits[0]))
-            rows = self.detected[:, first:first + len(crits) * self.blocks.n_bins]
+            rows = self.detected[:, first : first + len(crits) * self.blocks.n_bins]
             yield block, rows
             rows[:] = 0.0
 
@@ -189,8 +187,9 @@ class WholeFrames:
     whole-pixel shift (:func:`.adds.add_recentred`); its integrated images scored whole
     (:func:`.metrics.score_images`). The same interface as :class:`.cropped.CroppedFrames`."""
 
-    def __init__(self, n_pixels: int, encircled: EncircledEnergy, diffraction_limited_peak: float,
-                 pixel_scale_arcsec: float):
+    def __init__(
+        self, n_pixels: int, encircled: EncircledEnergy, diffraction_limited_peak: float, pixel_scale_arcsec: float
+    ):
         self.item_shape = (n_pixels, n_pixels)
         self.window = axis_window(n_pixels)
         self.encircled, self.peak, self.scale = encircled, diffraction_limited_peak, pixel_scale_arcsec

@@ -25,13 +25,13 @@ def add_recentred(frames, shifts, rows, partial, sign):  # pragma: no cover (jit
             sx = shifts[j, 1] % n
             for y in range(y0, min(y0 + tile, n)):
                 src = frames[j, (y - shifts[j, 0]) % n]
-                body, head = src[:n - sx], src[n - sx:]  # to columns sx.. and ..sx
+                body, head = src[: n - sx], src[n - sx :]  # to columns sx.. and ..sx
                 o = y * n
                 for c in range(rows.shape[1]):
                     r = rows[j, c]
                     if r < 0:
                         continue
-                    to_body, to_head = partial[r, o + sx:o + n], partial[r, o:o + sx]
+                    to_body, to_head = partial[r, o + sx : o + n], partial[r, o : o + sx]
                     for x in range(n - sx):
                         to_body[x] += sign * body[x]
                     for x in range(sx):

@@ -77,9 +77,16 @@ class CroppedFrames:
         """Flat indices of the crop's pixels around the axis (:func:`.accumulation.axis_window`)."""
         return axis_window(self.crop_px)
 
-    def prepare(self, spectra, shifts: np.ndarray, remainder: np.ndarray, flux: np.ndarray,
-                radial_sums: np.ndarray | None = None, which: np.ndarray | None = None,
-                out: np.ndarray | None = None) -> np.ndarray:
+    def prepare(
+        self,
+        spectra,
+        shifts: np.ndarray,
+        remainder: np.ndarray,
+        flux: np.ndarray,
+        radial_sums: np.ndarray | None = None,
+        which: np.ndarray | None = None,
+        out: np.ndarray | None = None,
+    ) -> np.ndarray:
         """The vectors (k, item) float64 of the frames (k, n, n) of ``spectra``
         (:class:`.registration.FrameSpectra`) registered by whole-pixel ``shifts`` (k, 2) int
         (``np.roll`` semantics) and sub-pixel ``remainder`` (k, 2) (y, x), of flux ``flux`` (k,);
@@ -101,7 +108,7 @@ class CroppedFrames:
             crops = fourier_shift(crops, remainder)
         elif moving.any():
             crops[moving] = fourier_shift(crops[moving], remainder[moving])
-        out[picked, :c * c] = crops[picked].reshape(-1, c * c)
+        out[picked, : c * c] = crops[picked].reshape(-1, c * c)
         radial = slice(c * c, c * c + self.encircled.n_bins)
         known = np.zeros(k, bool) if radial_sums is None else which & np.isfinite(radial_sums).all(axis=1)
         if known.all():
@@ -129,7 +136,7 @@ class CroppedFrames:
     def images(self, vectors: np.ndarray) -> np.ndarray:
         """The crops (..., c, c) of vectors (..., item) (a view)."""
         c = self.crop_px
-        return vectors[..., :c * c].reshape(*vectors.shape[:-1], c, c)
+        return vectors[..., : c * c].reshape(*vectors.shape[:-1], c, c)
 
     @staticmethod
     def flux(vectors: np.ndarray) -> np.ndarray:
@@ -142,6 +149,5 @@ class CroppedFrames:
         c2, n_bins = self.crop_px**2, self.encircled.n_bins
         images, flux = self.images(vectors), self.flux(vectors)
         strehl = strehl_from(images.max(axis=(-2, -1)), flux, self.diffraction_limited_peak)
-        radius = self.encircled.radius_px_of(self.encircled.energies_of(vectors[..., c2:c2 + n_bins]), flux)
+        radius = self.encircled.radius_px_of(self.encircled.energies_of(vectors[..., c2 : c2 + n_bins]), flux)
         return strehl, fwhm_arcsec(images, self.pixel_scale_arcsec), d50_from_radius(radius, self.pixel_scale_arcsec)
-

@@ -56,9 +56,12 @@ class Detector:
         if self.electron_multiplying and self.photons_per_frame is None:
             raise ValueError(f"detector {self.name!r}: a noiseless detector has no gain register")
         if self.photon_counting_threshold_e is not None and not (
-                self.electron_multiplying and self.photon_counting_threshold_e > 0):
-            raise ValueError(f"detector {self.name!r}: photon_counting_threshold_e needs electron_multiplying "
-                             f"and must be > 0, got {self.photon_counting_threshold_e}")
+            self.electron_multiplying and self.photon_counting_threshold_e > 0
+        ):
+            raise ValueError(
+                f"detector {self.name!r}: photon_counting_threshold_e needs electron_multiplying "
+                f"and must be > 0, got {self.photon_counting_threshold_e}"
+            )
 
     @property
     def noiseless(self) -> bool:
@@ -90,8 +93,10 @@ class KeyedNoise:
         unit = np.ascontiguousarray(frames_unit_flux, dtype=np.float32)
         k, n, _ = unit.shape
         if n * n % 64 or k > len(self._within) or n != self.n_pixels:
-            raise ValueError(f"chunk {unit.shape}: n^2 must be a multiple of 64, frames {self.n_pixels} square, "
-                             f"at most {len(self._within)} of them")
+            raise ValueError(
+                f"chunk {unit.shape}: n^2 must be a multiple of 64, frames {self.n_pixels} square, "
+                f"at most {len(self._within)} of them"
+            )
         noise_streams.cumulative(unit, self._within[:k], self._rows_cumulative[:k])
         self._prepared += 1
         return PreparedChunk(self, unit, self._prepared)
@@ -103,8 +108,14 @@ class PreparedChunk:
     def __init__(self, noise: KeyedNoise, unit: np.ndarray, number: int):
         self._noise, self.unit, self._number = noise, unit, number
 
-    def detect(self, detector: Detector, seed: int, first_frame: int,
-               out: np.ndarray | None = None, drawn: np.ndarray | None = None) -> tuple[np.ndarray, ...]:
+    def detect(
+        self,
+        detector: Detector,
+        seed: int,
+        first_frame: int,
+        out: np.ndarray | None = None,
+        drawn: np.ndarray | None = None,
+    ) -> tuple[np.ndarray, ...]:
         """The chunk's detected frames [electron] (k, n, n) float32 (``out`` if given), frames
         ``first_frame..``, with their row and column sums (k, n) float64 and peak (k,) float32.
         A noisy detector only. With ``drawn`` (k,) bool, only those frames are drawn (the same
@@ -122,14 +133,27 @@ class PreparedChunk:
         rows, cols, peak = np.empty((k, n)), np.empty((k, n)), np.empty(k, np.float32)
         drawn = np.ones(k, np.bool_) if drawn is None else np.asarray(drawn, np.bool_)
         em = detector.electron_multiplying
-        noise_streams.detect_frames(unit, noise._within[:k], noise._rows_cumulative[:k],
-                              float(detector.photons_per_frame), np.float32(0.0 if em else detector.read_noise_e),
-                              seed, detector_key(detector.name), first_frame, drawn, out, rows, cols, peak,
-                              noise._bits, noise._normals)
+        noise_streams.detect_frames(
+            unit,
+            noise._within[:k],
+            noise._rows_cumulative[:k],
+            float(detector.photons_per_frame),
+            np.float32(0.0 if em else detector.read_noise_e),
+            seed,
+            detector_key(detector.name),
+            first_frame,
+            drawn,
+            out,
+            rows,
+            cols,
+            peak,
+            noise._bits,
+            noise._normals,
+        )
         if em:
             for j in np.flatnonzero(drawn):
                 out[j] = gain_register(out[j], detector, emccd_rng(seed, detector_key(detector.name), first_frame + j))
-                noise_streams.frame_sums(out[j:j + 1], rows[j:j + 1], cols[j:j + 1], peak[j:j + 1])
+                noise_streams.frame_sums(out[j : j + 1], rows[j : j + 1], cols[j : j + 1], peak[j : j + 1])
         return out, rows, cols, peak
 
 

@@ -42,8 +42,10 @@ class GuessedBins:
         self.block_distinct = np.unique(blocks.counts)
         self.clean = {c: sort_key(values, larger) for c, (values, larger) in clean.items()}  # per criterion
         self.clean_sorted = {c: np.sort(key) for c, key in self.clean.items()}
-        self.clean_block_sorted = {c: [np.sort(key[b * blocks.block_frames:(b + 1) * blocks.block_frames])
-                                       for b in range(blocks.n_blocks)] for c, key in self.clean.items()}
+        self.clean_block_sorted = {
+            c: [np.sort(key[b * blocks.block_frames : (b + 1) * blocks.block_frames]) for b in range(blocks.n_blocks)]
+            for c, key in self.clean.items()
+        }
         self._seen: dict = {}  # (detector, criterion) -> sorted keys of the run, of the block, block, moments
         self._clean_seen: dict = {}  # criterion -> frames seen, their sorted noiseless keys, of each block
 
@@ -87,8 +89,9 @@ class GuessedBins:
                 ties = _earlier_ties(in_block, key[mine])
                 in_block = _merged(in_block, key[mine])
                 in_block_below = np.searchsorted(in_block, key[mine])
-                unseen_below = (np.searchsorted(self.clean_block_sorted[c][b], mapped[mine])
-                                - np.searchsorted(in_block_clean[b], mapped[mine]))
+                unseen_below = np.searchsorted(self.clean_block_sorted[c][b], mapped[mine]) - np.searchsorted(
+                    in_block_clean[b], mapped[mine]
+                )
                 ranked = in_block if len(in_block) >= self.MIN_IN_BLOCK else run
                 plain = np.searchsorted(ranked, key[mine]) * (blocks.block_frames / len(ranked))
                 rank = weight * (in_block_below + unseen_below) + (1 - weight) * plain

@@ -18,8 +18,14 @@ import xarray as xr
 
 from .accumulation import PartialSums, TimeBlocks, WholeFrames, recentring_shifts_px
 from .cropped import CroppedFrames, crop_px
-from .dataset import (add_block_scores, add_images, add_noiseless_scores, add_recentred_strehl, add_registration,
-                      result_dataset)
+from .dataset import (
+    add_block_scores,
+    add_images,
+    add_noiseless_scores,
+    add_recentred_strehl,
+    add_registration,
+    result_dataset,
+)
 from .detector import Detector
 from .guesses import GuessedBins
 from .metrics import d50_from_radius, score_images
@@ -121,8 +127,13 @@ class MethodRun:
             return None
         return self.registration.positions_px(spectra.frames, common[1], spectra)
 
-    def measures(self, spectra: FrameSpectra, common: tuple[np.ndarray, ...], registered: np.ndarray | None,
-                 radial_sums: np.ndarray | None) -> tuple[np.ndarray, ...]:
+    def measures(
+        self,
+        spectra: FrameSpectra,
+        common: tuple[np.ndarray, ...],
+        registered: np.ndarray | None,
+        radial_sums: np.ndarray | None,
+    ) -> tuple[np.ndarray, ...]:
         """Flux, centre of gravity, Strehl, d50 [pixel] (about the registered position; the centre
         of gravity with ``cog``) and registered position (:meth:`registered`) of the frames (k, n, n)
         of ``spectra`` whose flux, centre of gravity and Strehl are ``common`` (they do not depend on
@@ -144,8 +155,9 @@ class MethodRun:
         """Pass 0's measures of the noiseless frames (:meth:`measures` of all frames): the guesses' predictor."""
         self.clean = clean
         larger = self.run.larger
-        self.guessed = GuessedBins(self.bins.shape, self.run.counts, self.blocks, {
-            0: (clean[2], larger[0]), 1: (clean[3], larger[1])})
+        self.guessed = GuessedBins(
+            self.bins.shape, self.run.counts, self.blocks, {0: (clean[2], larger[0]), 1: (clean[3], larger[1])}
+        )
 
     def allocate(self, n_pixels: int, chunk_frames: int) -> None:
         """The accumulation (whole frames for ``cog``, cropped for a sub-pixel method), the partial
@@ -161,17 +173,26 @@ class MethodRun:
         if self.registration.subpixel:
             self.buffer = np.empty((2, chunk_frames, *self.accumulation.item_shape))
 
-    def _prepared(self, spectra: FrameSpectra, i: int, sl: slice, flux: np.ndarray, energies=None, which=None,
-                  slot: int = 0) -> np.ndarray:
+    def _prepared(
+        self, spectra: FrameSpectra, i: int, sl: slice, flux: np.ndarray, energies=None, which=None, slot: int = 0
+    ) -> np.ndarray:
         """Detector ``i``'s frames ``sl`` (held by ``spectra``, of flux ``flux``) ready to add
         (:meth:`.accumulation.WholeFrames.prepare`, :meth:`.cropped.CroppedFrames.prepare`), those of
         ``which`` (k,) bool only; in buffer ``slot`` (0 or 1: valid until that slot's next use)."""
         frames = self.frames
-        return self.accumulation.prepare(spectra, frames.shifts[i, sl], frames.remainder[i, sl], flux, energies,
-                                         which, None if self.buffer is None else self.buffer[slot])
+        return self.accumulation.prepare(
+            spectra,
+            frames.shifts[i, sl],
+            frames.remainder[i, sl],
+            flux,
+            energies,
+            which,
+            None if self.buffer is None else self.buffer[slot],
+        )
 
-    def add_detected(self, i: int, detector: Detector, sl: slice, detected: FrameSpectra,
-                     measures: Sequence[np.ndarray]) -> None:
+    def add_detected(
+        self, i: int, detector: Detector, sl: slice, detected: FrameSpectra, measures: Sequence[np.ndarray]
+    ) -> None:
         """Pass 1, detector ``i``'s frames ``sl`` (``detected``: their :class:`.registration.FrameSpectra`):
         their measures recorded, the frames recentred into the sums of the criteria binned early, the
         recentred long exposure and, for a noisy detector, the guessed bins of the late criteria (and
@@ -183,8 +204,9 @@ class MethodRun:
         radial_sums = measures[5] if len(measures) > 5 else None
         prepared = self._prepared(detected, i, sl, frames.flux[i, sl], radial_sums)
         # the early criteria and the recentred long exposure: shifts known now
-        rows_early = np.concatenate([sums.run_rows(early, self.bins[i, early, sl]),
-                                     np.full((k, 1), sums.long_exposure_row)], axis=1)  # (k, early + 1)
+        rows_early = np.concatenate(
+            [sums.run_rows(early, self.bins[i, early, sl]), np.full((k, 1), sums.long_exposure_row)], axis=1
+        )  # (k, early + 1)
         rows_block = sums.block_rows(early, sl, self.blocks.bins[i, early, sl])
         rows_guessed = rows_guessed_block = np.empty((k, 0), dtype=np.int64)
         if guessed is not None and not detector.noiseless:
@@ -192,8 +214,13 @@ class MethodRun:
                 guessed.guess(i, c, sl, per_frame, self.run.larger[c])
             rows_guessed = sums.run_rows(late, guessed.run[i, late, sl])
             rows_guessed_block = sums.block_rows(late, sl, guessed.block[i, late, sl])
-        add(prepared, shifts, np.concatenate([rows_early, rows_block, rows_guessed, rows_guessed_block], axis=1),
-            sums.detected_rows[i], 1.0)
+        add(
+            prepared,
+            shifts,
+            np.concatenate([rows_early, rows_block, rows_guessed, rows_guessed_block], axis=1),
+            sums.detected_rows[i],
+            1.0,
+        )
         if not detector.noiseless:  # a noiseless detector's noiseless sums are its sums (copied when scoring)
             self.pending_noiseless.append((i, np.concatenate([rows_early[:, :-1], rows_guessed], axis=1)))
         self.accumulation.window_values(prepared, shifts, frames.in_window[i, sl])
@@ -213,8 +240,13 @@ class MethodRun:
             radial_sums = self.run.encircled.radial_sums_about(unit.frames, centres.transpose(1, 0, 2), unit)
             radial_sums = radial_sums.transpose(1, 0, 2)  # (detector, frame, bin)
         for (i, rows), about in zip(pending, radial_sums):
-            self.accumulation.add(self._prepared(unit, i, sl, unit.flux(), about, slot=1), frames.shifts[i, sl], rows,
-                                  self.sums.noiseless_rows[i], 1.0)
+            self.accumulation.add(
+                self._prepared(unit, i, sl, unit.flux(), about, slot=1),
+                frames.shifts[i, sl],
+                rows,
+                self.sums.noiseless_rows[i],
+                1.0,
+            )
 
     def rank_late(self) -> None:
         """Pass 2's start: the late criteria's values from the frames' measures, ranked."""
@@ -224,23 +256,41 @@ class MethodRun:
     def add_noiseless_detector(self, i: int, sl: slice, unit: FrameSpectra) -> None:
         """Pass 2, a noiseless detector ``i``'s frames ``sl`` (``unit``): into their late criteria's bins."""
         late, sums = self.late, self.sums
-        final_rows = np.concatenate([sums.run_rows(late, self.bins[i, late, sl]),
-                                     sums.block_rows(late, sl, self.blocks.bins[i, late, sl])], axis=1)
-        self.accumulation.add(self._prepared(unit, i, sl, self.frames.flux[i, sl]), self.frames.shifts[i, sl],
-                              final_rows, sums.detected_rows[i], 1.0)
+        final_rows = np.concatenate(
+            [sums.run_rows(late, self.bins[i, late, sl]), sums.block_rows(late, sl, self.blocks.bins[i, late, sl])],
+            axis=1,
+        )
+        self.accumulation.add(
+            self._prepared(unit, i, sl, self.frames.flux[i, sl]),
+            self.frames.shifts[i, sl],
+            final_rows,
+            sums.detected_rows[i],
+            1.0,
+        )
 
     def guessed_wrong(self, i: int, sl: slice) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Pass 2, a noisy detector ``i``'s frames ``sl``: the rows (k, late [+ late]) of their final
         and guessed bins, and which frames (k,) are in a wrong one (to draw again and move)."""
         late, sums, guessed = self.late, self.sums, self.guessed
-        final_rows = np.concatenate([sums.run_rows(late, self.bins[i, late, sl]),
-                                     sums.block_rows(late, sl, self.blocks.bins[i, late, sl])], axis=1)
-        guessed_rows = np.concatenate([sums.run_rows(late, guessed.run[i, late, sl]),
-                                       sums.block_rows(late, sl, guessed.block[i, late, sl])], axis=1)
+        final_rows = np.concatenate(
+            [sums.run_rows(late, self.bins[i, late, sl]), sums.block_rows(late, sl, self.blocks.bins[i, late, sl])],
+            axis=1,
+        )
+        guessed_rows = np.concatenate(
+            [sums.run_rows(late, guessed.run[i, late, sl]), sums.block_rows(late, sl, guessed.block[i, late, sl])],
+            axis=1,
+        )
         return final_rows, guessed_rows, (final_rows != guessed_rows).any(axis=1)
 
-    def move(self, i: int, sl: slice, detected: FrameSpectra, detected_rows: np.ndarray, unit: FrameSpectra,
-             wrong: tuple[np.ndarray, np.ndarray, np.ndarray]) -> None:
+    def move(
+        self,
+        i: int,
+        sl: slice,
+        detected: FrameSpectra,
+        detected_rows: np.ndarray,
+        unit: FrameSpectra,
+        wrong: tuple[np.ndarray, np.ndarray, np.ndarray],
+    ) -> None:
         """Pass 2: detector ``i``'s frames ``sl`` guessed ``wrong`` (:meth:`guessed_wrong`), drawn
         again (``detected`` and its row sums ``detected_rows``, valid for those frames), moved from
         their guessed bins to their final ones (detected, and noiseless ``unit``)."""
@@ -254,9 +304,12 @@ class MethodRun:
         shifts, add = frames.shifts[i, sl], self.accumulation.add
         moved = final_rows != guessed_rows  # (k, late [+ late]): rows differ where bins do
         out_of, into = np.where(moved, guessed_rows, -1), np.where(moved, final_rows, -1)
-        for slot, (frames_of, flux, partial, m) in enumerate((
+        for slot, (frames_of, flux, partial, m) in enumerate(
+            (
                 (detected, frames.flux[i, sl], sums.detected_rows[i], moved.shape[1]),
-                (unit, unit.flux(), sums.noiseless_rows[i], len(self.late)))):
+                (unit, unit.flux(), sums.noiseless_rows[i], len(self.late)),
+            )
+        ):
             prepared = self._prepared(frames_of, i, sl, flux, which=drawn, slot=slot)
             add(prepared, shifts, out_of[:, :m], partial, -1.0)
             add(prepared, shifts, into[:, :m], partial, 1.0)
@@ -267,7 +320,7 @@ class MethodRun:
         for block, rows in self.sums.completed_blocks(sl, crits):
             _, *scores = score_partial_sums(rows, len(crits), blocks.n_bins, blocks.last_bin, self.accumulation.score)
             for values, score in zip(blocks.values, scores):
-                values[block, crits[0]:crits[-1] + 1] = score
+                values[block, crits[0] : crits[-1] + 1] = score
 
     def score(self, long_none: np.ndarray, image_crop_px: int | None) -> xr.Dataset:
         """Score the integrated images (cumulative sums of bins) and the long exposures (``long_none``,
@@ -276,8 +329,9 @@ class MethodRun:
         n_crit = len(run.criteria)
         lc = sums.long_exposure_row
         long_registered = sums.detected[:, lc]
-        frame_recentred_strehl = value_at_peak(frames.in_window, accumulation.window,
-                                               accumulation.images(long_registered), frames.flux, run.peak)
+        frame_recentred_strehl = value_at_peak(
+            frames.in_window, accumulation.window, accumulation.images(long_registered), frames.flux, run.peak
+        )
         scoring = (n_crit, sums.n_bins, sums.last_bin, accumulation.score)
         for i, detector in enumerate(run.detectors):
             if detector.noiseless:
@@ -290,13 +344,28 @@ class MethodRun:
         else:
             long_images = [long_none, accumulation.images(long_registered).copy()]
             long_flux = [None, accumulation.flux(long_registered).copy()]
-            long_scores = [np.stack(pair) for pair in zip(score_images(long_none, run.peak, run.scale, run.encircled),
-                                                          accumulation.score(long_registered))]
+            long_scores = [
+                np.stack(pair)
+                for pair in zip(
+                    score_images(long_none, run.peak, run.scale, run.encircled), accumulation.score(long_registered)
+                )
+            ]
         integrated, *run_scores = score_partial_sums(sums.detected[:, :lc], *scoring)
         sums.detected = sums.detected_rows = long_registered = None
-        ds = result_dataset(run.detectors, run.criteria, run.criteria_external, run.fractions, run.counts,
-                            run.n_frames, *run_scores, *long_scores, frames.strehl, frames.d50_arcsec(run.scale),
-                            frames.centroid, self.values)
+        ds = result_dataset(
+            run.detectors,
+            run.criteria,
+            run.criteria_external,
+            run.fractions,
+            run.counts,
+            run.n_frames,
+            *run_scores,
+            *long_scores,
+            frames.strehl,
+            frames.d50_arcsec(run.scale),
+            frames.centroid,
+            self.values,
+        )
         add_noiseless_scores(ds, *noiseless_scores)
         add_block_scores(ds, self.blocks)
         add_recentred_strehl(ds, frame_recentred_strehl)
@@ -304,6 +373,11 @@ class MethodRun:
         if image_crop_px != 0:
             flux = None if isinstance(accumulation, WholeFrames) else accumulation.flux(integrated)
             ds = add_images(ds, accumulation.images(integrated), long_images, image_crop_px, flux, long_flux)
-        ds.attrs.update(pixel_scale_arcsec=run.scale, diffraction_limited_peak=run.peak, seed=run.seed,
-                        n_pixels=frames.n_pixels, frames_drawn_again=self.drawn_again)
+        ds.attrs.update(
+            pixel_scale_arcsec=run.scale,
+            diffraction_limited_peak=run.peak,
+            seed=run.seed,
+            n_pixels=frames.n_pixels,
+            frames_drawn_again=self.drawn_again,
+        )
         return ds

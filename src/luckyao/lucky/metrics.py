@@ -77,8 +77,9 @@ def d50_from_radius(radius_px: np.ndarray, pixel_scale_arcsec: float) -> np.ndar
     return 2 * radius_px * pixel_scale_arcsec
 
 
-def score_images(images: np.ndarray, diffraction_limited_peak: float, pixel_scale_arcsec: float,
-                 encircled: "EncircledEnergy") -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def score_images(
+    images: np.ndarray, diffraction_limited_peak: float, pixel_scale_arcsec: float, encircled: "EncircledEnergy"
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Strehl ratio, FWHM [arcsec] and d50 [arcsec] (centred on the centre of gravity) of
     images (..., n, n), each of shape (...): :func:`strehl`, :func:`fwhm_arcsec` and
     :func:`d50_from_radius` of :meth:`EncircledEnergy.radius_px`."""
@@ -150,8 +151,7 @@ class EncircledEnergy:
         if images.shape[-2:] != (n, n):
             raise ValueError(f"images must be (..., {n}, {n}), got {images.shape}")
         flat = images.reshape(-1, n, n)
-        centres = (centroid_px(flat) if centres_px is None
-                   else np.asarray(centres_px, dtype=np.float64).reshape(-1, 2))
+        centres = centroid_px(flat) if centres_px is None else np.asarray(centres_px, dtype=np.float64).reshape(-1, 2)
         iy, ix, fy, fx, kernel = self._frequencies
         out = np.empty((flat.shape[0], self.n_radii), dtype=np.float64)
         for start in range(0, flat.shape[0], self.chunk_frames):
@@ -222,8 +222,16 @@ class EncircledEnergy:
             if spectra is None:
                 np.copyto(frame, image, casting="same_kind")
                 fft.execute()
-            radial_energy(spectrum if spectra is None else spectra.spectrum(j), centres[j], fy, fx, row_end, bin_of,
-                          weight, binned[j])
+            radial_energy(
+                spectrum if spectra is None else spectra.spectrum(j),
+                centres[j],
+                fy,
+                fx,
+                row_end,
+                bin_of,
+                weight,
+                binned[j],
+            )
         return self.energies_of(binned)
 
     @property
@@ -232,8 +240,9 @@ class EncircledEnergy:
         :meth:`radial_sums_about`'s sums."""
         return self._radial[-1].shape[0]
 
-    def radial_sums_about(self, images: np.ndarray, centres_px: np.ndarray, spectra=None,
-                          which: np.ndarray | None = None) -> np.ndarray:
+    def radial_sums_about(
+        self, images: np.ndarray, centres_px: np.ndarray, spectra=None, which: np.ndarray | None = None
+    ) -> np.ndarray:
         """The radial sums (k, m, n_bins) of :meth:`energies_binned` (its terms of equal ``|f|``,
         before their product with the kernel: :meth:`energies_of`) of images (k, n, n) about several
         centres each, ``centres_px`` (k, m, 2), each image's spectrum (from ``spectra`` if given)
@@ -249,8 +258,9 @@ class EncircledEnergy:
             if spectra is None:
                 np.copyto(frame, images[j], casting="same_kind")
                 fft.execute()
-            radial_energies(spectrum if spectra is None else spectra.spectrum(j), about, fy, fx, row_end, bin_of,
-                            weight, out)
+            radial_energies(
+                spectrum if spectra is None else spectra.spectrum(j), about, fy, fx, row_end, bin_of, weight, out
+            )
         return sums
 
     def energies_of(self, radial_sums: np.ndarray) -> np.ndarray:
@@ -259,13 +269,16 @@ class EncircledEnergy:
         shape = radial_sums.shape[:-1]
         return (radial_sums.reshape(-1, self.n_bins) @ self._radial[-1]).reshape(*shape, self.n_radii)
 
-    def fractions_binned(self, images: np.ndarray, centres_px: np.ndarray,
-                         flux: np.ndarray | None = None, spectra=None) -> np.ndarray:
+    def fractions_binned(
+        self, images: np.ndarray, centres_px: np.ndarray, flux: np.ndarray | None = None, spectra=None
+    ) -> np.ndarray:
         """:meth:`fractions` of images (k, n, n) about ``centres_px`` (k, 2), shape (k, n_radii):
         :meth:`energies_binned` over ``flux`` (k,), the images' sums if known (float64; default:
         summed here)."""
-        return self.fractions_of(self.energies_binned(images, centres_px, spectra),
-                                 images.sum(axis=(-2, -1), dtype=np.float64) if flux is None else flux)
+        return self.fractions_of(
+            self.energies_binned(images, centres_px, spectra),
+            images.sum(axis=(-2, -1), dtype=np.float64) if flux is None else flux,
+        )
 
     @staticmethod
     def fractions_of(energies: np.ndarray, flux: np.ndarray) -> np.ndarray:
@@ -275,8 +288,14 @@ class EncircledEnergy:
         with np.errstate(invalid="ignore", divide="ignore"):
             return np.where(flux[..., None] > 0, energies / flux[..., None], np.nan)
 
-    def radius_px_binned(self, images: np.ndarray, centres_px: np.ndarray, level: float = 0.5,
-                         flux: np.ndarray | None = None, spectra=None) -> np.ndarray:
+    def radius_px_binned(
+        self,
+        images: np.ndarray,
+        centres_px: np.ndarray,
+        level: float = 0.5,
+        flux: np.ndarray | None = None,
+        spectra=None,
+    ) -> np.ndarray:
         """:meth:`radius_px` of images (k, n, n) from :meth:`fractions_binned`, shape (k,)."""
         return _first_crossing(self.radii_px, self.fractions_binned(images, centres_px, flux, spectra), level)
 
@@ -285,8 +304,7 @@ class EncircledEnergy:
         (..., n_radii) (:meth:`energies_binned`, or a sum of them) and fluxes ``flux`` (...)."""
         return _first_crossing(self.radii_px, self.fractions_of(energies, flux), level)
 
-    def radius_px(self, images: np.ndarray, level: float = 0.5,
-                  centres_px: np.ndarray | None = None) -> np.ndarray:
+    def radius_px(self, images: np.ndarray, level: float = 0.5, centres_px: np.ndarray | None = None) -> np.ndarray:
         """Radius [pixel] where the encircled fraction first reaches ``level``, shape (...).
 
         First crossing on the radius grid, refined by bisection on the cubic
@@ -305,9 +323,13 @@ def _first_crossing(radii: np.ndarray, values: np.ndarray, level: float) -> np.n
     return out.reshape(values.shape[:-1])
 
 
-def fwhm_arcsec(images: np.ndarray, pixel_scale_arcsec: float,
-                samples_per_fwhm: int = 64, max_upsampling: int = 16,
-                margin_px: int = 2) -> np.ndarray:
+def fwhm_arcsec(
+    images: np.ndarray,
+    pixel_scale_arcsec: float,
+    samples_per_fwhm: int = 64,
+    max_upsampling: int = 16,
+    margin_px: int = 2,
+) -> np.ndarray:
     """Area-equivalent full width at half maximum [arcsec], shape (...) for images (..., n, n).
 
     ``FWHM = 2 sqrt(A / pi)``, ``A`` the area of the connected region around the peak
@@ -360,8 +382,9 @@ def _dirichlet_table(up: int, n: int) -> np.ndarray:
     return table
 
 
-def interpolant_patch(image: np.ndarray, jy: np.ndarray, jx: np.ndarray, up: int,
-                      nyquist: float | None = None) -> np.ndarray:
+def interpolant_patch(
+    image: np.ndarray, jy: np.ndarray, jx: np.ndarray, up: int, nyquist: float | None = None
+) -> np.ndarray:
     """The trigonometric interpolant (module docstring) of ``image`` (ny, nx) float64 at
     ``(y, x) = (jy / up, jx / up)`` [pixel] (``jy``, ``jx`` integer arrays), (len(jy), len(jx)).
 
@@ -394,8 +417,7 @@ def _nyquist(image: np.ndarray) -> float:
     return float(sy @ image @ sx)
 
 
-def _fwhm_px(image: np.ndarray, samples_per_fwhm: int, max_upsampling: int,
-             margin_px: int) -> float:
+def _fwhm_px(image: np.ndarray, samples_per_fwhm: int, max_upsampling: int, margin_px: int) -> float:
     ny, nx = image.shape
     peak_index = np.unravel_index(np.argmax(image), image.shape)
     if not image[peak_index] > 0:
@@ -430,8 +452,7 @@ def _fwhm_px(image: np.ndarray, samples_per_fwhm: int, max_upsampling: int,
     gy, gx = np.gradient(patch, 1 / up)
     grad = np.hypot(gy, gx)
     excess = patch - 0.5 * peak
-    distance_px = np.divide(excess, grad, out=np.where(excess >= 0, np.inf, -np.inf),
-                            where=grad > 0)
+    distance_px = np.divide(excess, grad, out=np.where(excess >= 0, np.inf, -np.inf), where=grad > 0)
     near = np.empty(inside.shape, dtype=bool)
     dilate(inside, near)
     coverage = np.clip(0.5 + distance_px * up, 0.0, 1.0)

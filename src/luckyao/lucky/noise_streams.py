@@ -34,7 +34,7 @@ from .stream_vectors import DEVIATES, GENERATORS, xoshiro_fill, ziggurat_rectang
 
 # numba's disk cache keys a kernel by its own file: this digest of the intrinsics the kernels
 # inline makes an edit of theirs recompile them (tests/test_simd.py keeps it current)
-# intrinsics digest (lucky/stream_vectors.py, simd.py): 5b432ed459322e69
+# intrinsics digest (lucky/stream_vectors.py, simd.py): 51adaa151f16311a
 
 LANES = GENERATORS
 """Interleaved xoshiro256++ generators of the Gaussian deviates (one vector)."""
@@ -210,8 +210,7 @@ def _poisson(lam, s):  # pragma: no cover (jit)
             return int(k)
         if k < 0 or (us < 0.013 and v > us):
             continue
-        if (math.log(v) + math.log(invalpha) - math.log(a / (us * us) + b)
-                <= -lam + k * loglam - math.lgamma(k + 1.0)):
+        if math.log(v) + math.log(invalpha) - math.log(a / (us * us) + b) <= -lam + k * loglam - math.lgamma(k + 1.0):
             return int(k)
 
 
@@ -317,7 +316,7 @@ def _finish(out, normals, sigma, rows, cols):  # pragma: no cover (jit)
     high = np.full(n, -np.inf, np.float32)
     cols[:] = 0.0
     for y in range(n):  # vectorised over the columns
-        o, g = out[y], normals[y * n: (y + 1) * n]
+        o, g = out[y], normals[y * n : (y + 1) * n]
         for x in range(n):
             v = fmuladd(sigma, g[x], o[x]) if sigma > 0 else o[x]
             o[x] = v
@@ -355,8 +354,9 @@ def frame_sums(frames, rows, cols, peak):  # pragma: no cover (jit)
 
 
 @numba.njit(cache=True, nogil=True)
-def detect_frames(unit, within, row_cumulative, photons, sigma, seed, key, first_frame, drawn, out, rows, cols,
-                  peak, bits, normals):  # pragma: no cover (jit)
+def detect_frames(
+    unit, within, row_cumulative, photons, sigma, seed, key, first_frame, drawn, out, rows, cols, peak, bits, normals
+):  # pragma: no cover (jit)
     """Detected frames ``out`` (k, n, n) float32 of unit-flux frames ``unit`` (k, n, n)
     (negative values count as 0) of cumulative sums ``within``, ``row_cumulative``
     (:func:`cumulative`), photons per frame ``photons``, read noise ``sigma`` (float32):

@@ -106,13 +106,23 @@ class ImageReference:
         return cls(result.frame_strehl.values, result.frame_d50_arcsec.values, result.frame_registered_px.values)
 
 
-def run_lucky(iter_chunks: Chunks, n_frames: int, detectors: Sequence[Detector], fractions: Sequence[float],
-              diffraction_limited_peak: float, pixel_scale_arcsec: float, seed: int,
-              criteria_external: Sequence[ExternalCriterion] = (),
-              image_crop_px: int | None = 64, reference: ImageReference | None = None,
-              n_blocks: int = 0, progress_interval_s: float = 5.0,
-              registration: Registration = COG, matched_strehl: MatchedStrehl | None = None,
-              crop_px: int | None = None) -> xr.Dataset:
+def run_lucky(
+    iter_chunks: Chunks,
+    n_frames: int,
+    detectors: Sequence[Detector],
+    fractions: Sequence[float],
+    diffraction_limited_peak: float,
+    pixel_scale_arcsec: float,
+    seed: int,
+    criteria_external: Sequence[ExternalCriterion] = (),
+    image_crop_px: int | None = 64,
+    reference: ImageReference | None = None,
+    n_blocks: int = 0,
+    progress_interval_s: float = 5.0,
+    registration: Registration = COG,
+    matched_strehl: MatchedStrehl | None = None,
+    crop_px: int | None = None,
+) -> xr.Dataset:
     """Lucky imaging of one frame cube for several detectors, criteria and fractions (module docstring).
 
     ``iter_chunks()`` returns a fresh iterator of ``(start, frames)``: ``frames``
@@ -149,27 +159,63 @@ def run_lucky(iter_chunks: Chunks, n_frames: int, detectors: Sequence[Detector],
     and the errors ``strehl_error``, ``fwhm_arcsec_error``, ``d50_arcsec_error``. Attribute
     ``frames_drawn_again`` (per detector): the noisy frames drawn again in pass 2.
     """
-    return run_lucky_methods(iter_chunks, n_frames, detectors, fractions, diffraction_limited_peak,
-                             pixel_scale_arcsec, seed, criteria_external, image_crop_px,
-                             None if reference is None else [reference], n_blocks, progress_interval_s,
-                             [registration], matched_strehl, crop_px)[0]
+    return run_lucky_methods(
+        iter_chunks,
+        n_frames,
+        detectors,
+        fractions,
+        diffraction_limited_peak,
+        pixel_scale_arcsec,
+        seed,
+        criteria_external,
+        image_crop_px,
+        None if reference is None else [reference],
+        n_blocks,
+        progress_interval_s,
+        [registration],
+        matched_strehl,
+        crop_px,
+    )[0]
 
 
-def run_lucky_methods(iter_chunks: Chunks, n_frames: int, detectors: Sequence[Detector], fractions: Sequence[float],
-                      diffraction_limited_peak: float, pixel_scale_arcsec: float, seed: int,
-                      criteria_external: Sequence[ExternalCriterion] = (),
-                      image_crop_px: int | None = 64, references: Sequence[ImageReference] | None = None,
-                      n_blocks: int = 0, progress_interval_s: float = 5.0,
-                      registrations: Sequence[Registration] = (COG,),
-                      matched_strehl: MatchedStrehl | None = None, crop_px: int | None = None) -> list[xr.Dataset]:
+def run_lucky_methods(
+    iter_chunks: Chunks,
+    n_frames: int,
+    detectors: Sequence[Detector],
+    fractions: Sequence[float],
+    diffraction_limited_peak: float,
+    pixel_scale_arcsec: float,
+    seed: int,
+    criteria_external: Sequence[ExternalCriterion] = (),
+    image_crop_px: int | None = 64,
+    references: Sequence[ImageReference] | None = None,
+    n_blocks: int = 0,
+    progress_interval_s: float = 5.0,
+    registrations: Sequence[Registration] = (COG,),
+    matched_strehl: MatchedStrehl | None = None,
+    crop_px: int | None = None,
+) -> list[xr.Dataset]:
     """:func:`run_lucky` of every registration method of ``registrations`` (distinct) in the same
     passes over the frames: each chunk is read and each detector's noise drawn once for all of
     them. ``references``: None, or one :class:`ImageReference` per method (that method's, e.g. the
     star's result of the same method). Returns one dataset per method, in order, each bit for bit
     that of :func:`run_lucky` with that method (and reference) alone."""
-    run = _LuckyRun(iter_chunks, n_frames, list(detectors), fractions, diffraction_limited_peak,
-                    pixel_scale_arcsec, seed, list(criteria_external), references, n_blocks, progress_interval_s,
-                    list(registrations), matched_strehl, crop_px)
+    run = _LuckyRun(
+        iter_chunks,
+        n_frames,
+        list(detectors),
+        fractions,
+        diffraction_limited_peak,
+        pixel_scale_arcsec,
+        seed,
+        list(criteria_external),
+        references,
+        n_blocks,
+        progress_interval_s,
+        list(registrations),
+        matched_strehl,
+        crop_px,
+    )
     run.measure_noiseless()
     run.detect_and_add()
     run.move_guessed_wrong()
@@ -213,11 +259,23 @@ class _LuckyRun:
     detector's noise drawn, the frames' flux, centre of gravity and Strehl measured once) and the
     methods' parts (:class:`.method_run.MethodRun`) they feed."""
 
-    def __init__(self, iter_chunks: Chunks, n_frames: int, detectors: list[Detector], fractions,
-                 diffraction_limited_peak: float, pixel_scale_arcsec: float, seed: int,
-                 criteria_external: list[ExternalCriterion], references, n_blocks: int,
-                 progress_interval_s: float, registrations: list[Registration], matched_strehl: MatchedStrehl | None,
-                 crop_px: int | None):
+    def __init__(
+        self,
+        iter_chunks: Chunks,
+        n_frames: int,
+        detectors: list[Detector],
+        fractions,
+        diffraction_limited_peak: float,
+        pixel_scale_arcsec: float,
+        seed: int,
+        criteria_external: list[ExternalCriterion],
+        references,
+        n_blocks: int,
+        progress_interval_s: float,
+        registrations: list[Registration],
+        matched_strehl: MatchedStrehl | None,
+        crop_px: int | None,
+    ):
         self.iter_chunks, self.n_frames, self.detectors, self.fractions = iter_chunks, n_frames, detectors, fractions
         self.peak, self.scale, self.seed, self.n_blocks = diffraction_limited_peak, pixel_scale_arcsec, seed, n_blocks
         self.criteria_external, self.progress_interval_s = criteria_external, progress_interval_s
@@ -226,8 +284,10 @@ class _LuckyRun:
         self.larger = [larger for _, larger in self.criteria]
         _check(n_frames, detectors, criteria_external, registrations, references)
         self.matched_strehl, self.crop_px = matched_strehl, crop_px
-        self.methods = [MethodRun(self, registration, None if references is None else reference)
-                        for registration, reference in zip(registrations, references or registrations)]
+        self.methods = [
+            MethodRun(self, registration, None if references is None else reference)
+            for registration, reference in zip(registrations, references or registrations)
+        ]
         self.guessing = any(m.guessing for m in self.methods)  # the same for every method
         self.noise = _ChunkNoise(detectors)
         self.long_none = self.encircled = self.clean = None
@@ -260,13 +320,17 @@ class _LuckyRun:
         their registered positions all from one reading of each frame's spectrum
         (:meth:`.metrics.EncircledEnergy.radial_sums_about`)."""
         registered = [method.registered(spectra, common) for method in self.methods]
-        about = [j for j, (method, r) in enumerate(zip(self.methods, registered))
-                 if method.registration.subpixel and r is not None]
+        about = [
+            j
+            for j, (method, r) in enumerate(zip(self.methods, registered))
+            if method.registration.subpixel and r is not None
+        ]
         radial = [None] * len(self.methods)
         if about:
             centres = np.stack([registered[j] for j in about], axis=1)  # (k, methods, 2)
-            for j, sums in zip(about, self.encircled.radial_sums_about(spectra.frames, centres, spectra)
-                               .transpose(1, 0, 2)):
+            for j, sums in zip(
+                about, self.encircled.radial_sums_about(spectra.frames, centres, spectra).transpose(1, 0, 2)
+            ):
                 radial[j] = sums
         return [method.measures(spectra, common, r, sums) for method, r, sums in zip(self.methods, registered, radial)]
 
@@ -346,9 +410,15 @@ class _LuckyRun:
                 method.score_blocks(sl, method.late)
         if self.guessing:
             for method in self.methods:
-                log.info("lucky pass 2/2 (%s): frames drawn again (guessed bins wrong) per noisy detector: %s",
-                         method.registration.name, ", ".join(f"{d.name} {n / self.n_frames:.1%}" for d, n in zip(
-                             self.detectors, method.drawn_again) if not d.noiseless))
+                log.info(
+                    "lucky pass 2/2 (%s): frames drawn again (guessed bins wrong) per noisy detector: %s",
+                    method.registration.name,
+                    ", ".join(
+                        f"{d.name} {n / self.n_frames:.1%}"
+                        for d, n in zip(self.detectors, method.drawn_again)
+                        if not d.noiseless
+                    ),
+                )
 
     def score(self, image_crop_px: int | None) -> list[xr.Dataset]:
         """Each method's dataset (:meth:`.MethodRun.score`), one method's integrated images at a time."""
@@ -371,7 +441,12 @@ def _check(n_frames: int, detectors: list[Detector], criteria_external, registra
     if references is not None and len(references) != len(registrations):
         raise ValueError(f"references: {len(references)} for {len(registrations)} registration methods (one each)")
     for reference in references or ():
-        if (np.shape(reference.centroid_px) != (n_det, n_frames, 2) or np.shape(reference.strehl) != (n_det, n_frames)
-                or np.shape(reference.d50_arcsec) != (n_det, n_frames)):
-            raise ValueError(f"reference: centroids {np.shape(reference.centroid_px)} and criteria "
-                             f"{np.shape(reference.strehl)} do not match (detector, frame) = {(n_det, n_frames)}")
+        if (
+            np.shape(reference.centroid_px) != (n_det, n_frames, 2)
+            or np.shape(reference.strehl) != (n_det, n_frames)
+            or np.shape(reference.d50_arcsec) != (n_det, n_frames)
+        ):
+            raise ValueError(
+                f"reference: centroids {np.shape(reference.centroid_px)} and criteria "
+                f"{np.shape(reference.strehl)} do not match (detector, frame) = {(n_det, n_frames)}"
+            )

@@ -12,7 +12,7 @@ from ..simd import fmuladd
 
 # numba's disk cache keys a kernel by its own file: this digest of the intrinsics the kernels
 # inline makes an edit of theirs recompile them (tests/test_simd.py keeps it current)
-# intrinsics digest (simd.py): 1bbca53bd66fda7d
+# intrinsics digest (simd.py): 86b3bc4b14f3bbee
 
 
 @numba.njit(cache=True, nogil=True, fastmath={"contract"})

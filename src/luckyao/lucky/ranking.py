@@ -6,8 +6,8 @@ frames are kept. The kept sets are nested, so they are sums of disjoint *bins* o
 fraction ``k``'s selection is the union of bins ``0..last_bin[k]``.
 """
 
-from dataclasses import dataclass
 from collections.abc import Sequence
+from dataclasses import dataclass
 
 import numpy as np
 

@@ -88,8 +88,14 @@ class _Transforms:
         self.frame = pyfftw.empty_aligned((n, n), dtype=np.float32)
         self.spectrum = pyfftw.empty_aligned((n, n // 2 + 1), dtype=np.complex64)
         self.forward = pyfftw.FFTW(self.frame, self.spectrum, axes=(0, 1), flags=("FFTW_ESTIMATE",), threads=1)
-        self.backward = pyfftw.FFTW(self.spectrum, self.frame, axes=(0, 1), direction="FFTW_BACKWARD",
-                                    flags=("FFTW_ESTIMATE", "FFTW_DESTROY_INPUT"), threads=1)
+        self.backward = pyfftw.FFTW(
+            self.spectrum,
+            self.frame,
+            axes=(0, 1),
+            direction="FFTW_BACKWARD",
+            flags=("FFTW_ESTIMATE", "FFTW_DESTROY_INPUT"),
+            threads=1,
+        )
 
     def transform(self, frame: np.ndarray, out: np.ndarray) -> None:
         """``out`` (n, n/2 + 1) = the real FFT of ``frame``: in place of copies where both are
@@ -167,15 +173,17 @@ class FrameSpectra:
             return self.spectrum(j)
         boxes = self._boxes.get(m)
         if boxes is None or len(boxes[0]) < len(self._spectra):
-            boxes = self._boxes[m] = (np.empty((len(self._spectra), m, m // 2 + 1), np.complex64),
-                                      np.zeros(len(self._spectra), bool))
+            boxes = self._boxes[m] = (
+                np.empty((len(self._spectra), m, m // 2 + 1), np.complex64),
+                np.zeros(len(self._spectra), bool),
+            )
         spectra, done = boxes
         if self._box_chunk.get(m) is not self.frames:  # another chunk: forget this size's spectra
             done[:] = False
             self._box_chunk[m] = self.frames
         if not done[j]:
             lo = n // 2 - m // 2
-            _transforms(m).transform(self.frames[j, lo:lo + m, lo:lo + m], spectra[j])
+            _transforms(m).transform(self.frames[j, lo : lo + m, lo : lo + m], spectra[j])
             done[j] = True
         return spectra[j]
 
@@ -213,8 +221,14 @@ class _BatchTransforms:
         self.frames = pyfftw.zeros_aligned((b, n, n), dtype=np.float32)
         self.spectra = pyfftw.zeros_aligned((b, n, n // 2 + 1), dtype=np.complex64)
         self.forward = pyfftw.FFTW(self.frames, self.spectra, axes=(1, 2), flags=("FFTW_ESTIMATE",), threads=1)
-        self.backward = pyfftw.FFTW(self.spectra, self.frames, axes=(1, 2), direction="FFTW_BACKWARD",
-                                    flags=("FFTW_ESTIMATE", "FFTW_DESTROY_INPUT"), threads=1)
+        self.backward = pyfftw.FFTW(
+            self.spectra,
+            self.frames,
+            axes=(1, 2),
+            direction="FFTW_BACKWARD",
+            flags=("FFTW_ESTIMATE", "FFTW_DESTROY_INPUT"),
+            threads=1,
+        )
 
 
 @lru_cache(maxsize=16)
@@ -236,11 +250,11 @@ def fourier_shift(frames: np.ndarray, shifts_px: np.ndarray) -> np.ndarray:
     for start in range(0, k, FOURIER_SHIFT_BATCH):
         m = min(FOURIER_SHIFT_BATCH, k - start)
         batch = _batch_transforms(1 << (m - 1).bit_length(), n)  # the other frames of the batch: ignored
-        batch.frames[:m] = frames[start:start + m]
+        batch.frames[:m] = frames[start : start + m]
         batch.forward()
-        image_helpers.phase_ramps(batch.spectra[:m], shifts_px[start:start + m])
+        image_helpers.phase_ramps(batch.spectra[:m], shifts_px[start : start + m])
         batch.backward()  # normalised by FFTW's interface (1 / n^2)
-        out[start:start + m] = batch.frames[:m]
+        out[start : start + m] = batch.frames[:m]
     return out
 
 
@@ -281,8 +295,9 @@ class Registration:
                 raise ValueError(f"search_px must be in 1..{n}, of the parity of {n}: got {self.search_px}")
             if self.name == "xcorr":  # correlation with the reference (its central m square): its conjugate spectrum
                 lo = n // 2 - m // 2
-                reference = np.roll(self.diffraction_limited[lo:lo + m, lo:lo + m], (-(m // 2), -(m // 2)),
-                                    axis=(0, 1))  # axis at 0
+                reference = np.roll(
+                    self.diffraction_limited[lo : lo + m, lo : lo + m], (-(m // 2), -(m // 2)), axis=(0, 1)
+                )  # axis at 0
                 kernel_ft = np.conj(scipy.fft.rfft2(reference / reference.sum()))
             else:
                 kernel_ft = scipy.fft.rfft2(gaussian_kernel(m, self.core_fwhm_px))
@@ -307,8 +322,9 @@ class Registration:
         spectra = FrameSpectra(np.asarray(frames, dtype=np.float32)) if spectra is None else spectra
         return spectra.filtered(self.filter_key, self._kernel_ft)
 
-    def positions_px(self, frames: np.ndarray, centroids_px: np.ndarray,
-                     spectra: FrameSpectra | None = None) -> np.ndarray:
+    def positions_px(
+        self, frames: np.ndarray, centroids_px: np.ndarray, spectra: FrameSpectra | None = None
+    ) -> np.ndarray:
         """Positions (k, 2) (y, x) [pixel] of frames (k, n, n) whose centres of gravity are
         ``centroids_px`` (k, 2) (``cog``'s positions), the frames' ``spectra`` if known
         (:class:`FrameSpectra`); NaN where the method cannot register a frame."""
@@ -345,7 +361,7 @@ class Registration:
             centre = np.where(ok[:, None], centre, 0).astype(np.int64)
             py, px = centre[:, 0, None, None] + d[None, :, None], centre[:, 1, None, None] + d[None, None, :]
             y, x = py.astype(np.float64), np.broadcast_to(px, (k, len(d), len(d))).astype(np.float64)
-            inside = (y - position[:, 0, None, None]) ** 2 + (x - position[:, 1, None, None]) ** 2 <= radius ** 2
+            inside = (y - position[:, 0, None, None]) ** 2 + (x - position[:, 1, None, None]) ** 2 <= radius**2
             values = np.where(inside, frames[j, py % n, px % n], 0.0).astype(np.float64)
             total = values.sum(axis=(1, 2))
             with np.errstate(invalid="ignore", divide="ignore"):

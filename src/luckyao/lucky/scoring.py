@@ -69,8 +69,9 @@ def integrated_images(partial: np.ndarray, n_crit: int, n_bins: int, last_bin: n
     return images
 
 
-def score_partial_sums(partial: np.ndarray, n_crit: int, n_bins: int, last_bin: np.ndarray,
-                       score: Callable) -> tuple[np.ndarray, ...]:
+def score_partial_sums(
+    partial: np.ndarray, n_crit: int, n_bins: int, last_bin: np.ndarray, score: Callable
+) -> tuple[np.ndarray, ...]:
     """The :func:`integrated_images` of partial sums (``partial`` is overwritten) and their
     Strehl, FWHM [arcsec] and d50 [arcsec] (criterion, fraction, det) by ``score`` (the
     accumulation's: :class:`.accumulation.WholeFrames`, :class:`.cropped.CroppedFrames`).
@@ -79,8 +80,13 @@ def score_partial_sums(partial: np.ndarray, n_crit: int, n_bins: int, last_bin: 
     return (images, *score(images))
 
 
-def value_at_peak(frame_window: np.ndarray, window: np.ndarray, long_images: np.ndarray,
-                  frame_flux: np.ndarray, diffraction_limited_peak: float) -> np.ndarray:
+def value_at_peak(
+    frame_window: np.ndarray,
+    window: np.ndarray,
+    long_images: np.ndarray,
+    frame_flux: np.ndarray,
+    diffraction_limited_peak: float,
+) -> np.ndarray:
     """Per detector and frame, ``frame[p] / (flux P_dl)`` at the brightest pixel ``p`` of
     the long exposure (``long_images`` (det, n, n)) among the pixels ``window`` (flat
     indices, around the axis), from the frames' values there (``frame_window``). When

@@ -55,8 +55,10 @@ def xoshiro_fill(typingctx, states, out):
 
     def codegen(context, builder, signature, args):
         states_, out_ = (context.make_array(t)(context, builder, a) for t, a in zip(signature.args, args))
-        pointers = [builder.bitcast(builder.gep(states_.data, [ir.Constant(_I64, GENERATORS * w)]),
-                                    _STATE.as_pointer()) for w in range(4)]
+        pointers = [
+            builder.bitcast(builder.gep(states_.data, [ir.Constant(_I64, GENERATORS * w)]), _STATE.as_pointer())
+            for w in range(4)
+        ]
         slots = [cgutils.alloca_once(builder, _STATE) for _ in range(4)]
         for slot, pointer in zip(slots, pointers):
             builder.store(builder.load(pointer, align=8), slot)
@@ -89,15 +91,24 @@ def ziggurat_rectangle(typingctx, words, start, widths, limits, out):
     bits 0-7 the layer ``i``, 8 the sign, 9-31 the magnitude ``m``): ``out[start + k] = ±m
     widths[i]`` (float32) and, returned as an int64 bit mask (bit k), whether ``m >= limits[i]``
     (int32): the deviates to finish by the slow path (jit only; nothing bounds-checked)."""
-    if not (isinstance(words, types.Array) and words.dtype == types.int32 and words.layout == "C"
-            and isinstance(limits, types.Array) and limits.dtype == types.int32
-            and isinstance(widths, types.Array) and widths.dtype == types.float32
-            and isinstance(out, types.Array) and out.dtype == types.float32 and out.layout == "C"):
+    if not (
+        isinstance(words, types.Array)
+        and words.dtype == types.int32
+        and words.layout == "C"
+        and isinstance(limits, types.Array)
+        and limits.dtype == types.int32
+        and isinstance(widths, types.Array)
+        and widths.dtype == types.float32
+        and isinstance(out, types.Array)
+        and out.dtype == types.float32
+        and out.layout == "C"
+    ):
         raise TypingError("ziggurat_rectangle: int32 words and limits, float32 widths and out")
 
     def codegen(context, builder, signature, args):
-        words_, widths_, limits_, out_ = (context.make_array(signature.args[i])(context, builder, args[i])
-                                          for i in (0, 2, 3, 4))
+        words_, widths_, limits_, out_ = (
+            context.make_array(signature.args[i])(context, builder, args[i]) for i in (0, 2, 3, 4)
+        )
         first = context.cast(builder, args[1], signature.args[1], types.int64)
         every = ir.Constant(simd.MASK, [1] * DEVIATES)
         r = simd.load(builder, builder.gep(words_.data, [first]), every, _WORDS)
@@ -122,6 +133,9 @@ def _gather(builder, table, index, element: ir.Type):
     pointers = builder.gep(table, [index], source_etype=element)
     pointers.type = ir.VectorType(ir.PointerType(), DEVIATES)  # a GEP with a vector index: one address per lane
     name = "f32" if element == simd.F32 else "i32"
-    return simd.call(builder, f"llvm.masked.gather.v{DEVIATES}{name}.v{DEVIATES}p0", vector,
-                     [pointers, ir.Constant(_I32, 4), ir.Constant(simd.MASK, [1] * DEVIATES),
-                      ir.Constant(vector, None)])
+    return simd.call(
+        builder,
+        f"llvm.masked.gather.v{DEVIATES}{name}.v{DEVIATES}p0",
+        vector,
+        [pointers, ir.Constant(_I32, 4), ir.Constant(simd.MASK, [1] * DEVIATES), ir.Constant(vector, None)],
+    )

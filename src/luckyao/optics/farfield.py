@@ -71,8 +71,10 @@ class FarField:
         self._field_flat = field_t.reshape(-1)
         # (first row, its rows of the transposed first pass, where they go); the
         # last block may be partial: its other rows are stale and not added
-        self._blocks = [(row0, rows.T[row0:row0 + len(block)], block[:min(len(block), m - row0), :n])
-                        for row0 in range(0, m, len(block))]
+        self._blocks = [
+            (row0, rows.T[row0 : row0 + len(block)], block[: min(len(block), m - row0), :n])
+            for row0 in range(0, m, len(block))
+        ]
         flags = ("FFTW_ESTIMATE",)  # leaves the buffers untouched
         self._fft_y = pyfftw.FFTW(field_t, rows, axes=(1,), flags=flags, threads=1)
         self._fft_x = pyfftw.FFTW(block, self._spectrum, axes=(1,), flags=flags, threads=1)

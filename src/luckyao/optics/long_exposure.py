@@ -32,8 +32,9 @@ def pupil_autocorrelation(telescope: Telescope, n_across: int = 512):
     return np.clip(otf, 0, None), r_m
 
 
-def long_exposure_strehl(telescope: Telescope, wavelength_m: float, r0_500nm_m, outer_scale_m: float,
-                         n_across: int = 512) -> float:
+def long_exposure_strehl(
+    telescope: Telescope, wavelength_m: float, r0_500nm_m, outer_scale_m: float, n_across: int = 512
+) -> float:
     """Analytic long-exposure Strehl (no recentring); ``r0_500nm_m`` scalar or samples in time."""
     otf, r_m = pupil_autocorrelation(telescope, n_across)
     support = otf > 1e-9 * otf.max()

@@ -22,14 +22,32 @@ from .taps import column_taps, row_taps
 
 # numba's disk cache keys a kernel by its own file: this digest of the intrinsics the kernels
 # inline makes an edit of theirs recompile them (tests/test_simd.py keeps it current)
-# intrinsics digest (optics/taps.py, simd.py): 5fdfd1bedc13edf2
+# intrinsics digest (optics/taps.py, simd.py): dfbccef9dd712a44
 
 _U = numba.uint64  # unsigned indices: numba emits no negative-index wraparound code
 
 
 @numba.njit(cache=True, fastmath={"contract"}, nogil=True)
-def _sample_kernel(screens, starts, n_major, n_minor, skew, major_axis, flow, u0, w0, beta, steps, layer_scales,
-                   column_runs, column_ptr, column_codes, row_runs, row_ptr, out):  # pragma: no cover (jit)
+def _sample_kernel(
+    screens,
+    starts,
+    n_major,
+    n_minor,
+    skew,
+    major_axis,
+    flow,
+    u0,
+    w0,
+    beta,
+    steps,
+    layer_scales,
+    column_runs,
+    column_ptr,
+    column_codes,
+    row_runs,
+    row_ptr,
+    out,
+):  # pragma: no cover (jit)
     """out[s, d, y, x] = sum_l layer_scales[s, l] bilinear(screen_l at the footprint of grid
     point (y, x) along line of sight d at time step steps[s]).
 
@@ -83,8 +101,18 @@ def _sample_kernel(screens, starts, n_major, n_minor, skew, major_axis, flow, u0
                             continue
                         j_lo, j_hi = _tap_range(tap, runs, ptr, p)
                         for h in range(min(2, n - 2 * p)):  # along the major axis first
-                            _between(screens, start, m, k, n_lines, u_first + beta[d, l] * (2 * p + h), scale,
-                                     j_lo, j_hi, between[h])
+                            _between(
+                                screens,
+                                start,
+                                m,
+                                k,
+                                n_lines,
+                                u_first + beta[d, l] * (2 * p + h),
+                                scale,
+                                j_lo,
+                                j_hi,
+                                between[h],
+                            )
                         for r in range(ptr[p], ptr[p + 1]):  # then the minor taps
                             lo, hi, lines = runs[r, 0], runs[r, 1], runs[r, 2]
                             for b in range(lo, hi, LANES):
@@ -99,8 +127,18 @@ def _sample_kernel(screens, starts, n_major, n_minor, skew, major_axis, flow, u0
                                 continue
                             y_lo, y_hi = min(y_lo, runs[ptr[p], 0]), max(y_hi, runs[ptr[p + 1] - 1, 1])
                             j_lo, j_hi = _tap_range(tap, runs, ptr, p)
-                            _between(screens, start, m, k, n_lines, u_first + beta[d, l] * x, scale, j_lo, j_hi,
-                                     between[x - x0])
+                            _between(
+                                screens,
+                                start,
+                                m,
+                                k,
+                                n_lines,
+                                u_first + beta[d, l] * x,
+                                scale,
+                                j_lo,
+                                j_hi,
+                                between[x - x0],
+                            )
                         for y in range(y_lo, y_hi):  # then the minor taps
                             column_taps(between, tap, weight, y, grid, y * n + x0, column_codes, width)
 
@@ -146,8 +184,15 @@ class Propagator:
     elsewhere); ``screens`` holds the layers' strips.
     """
 
-    def __init__(self, layers: list[Layer], screens: ScreenSet, lines_of_sight: list[LineOfSight],
-                 grid: PupilGrid, centre_xy_m=(0.0, 0.0), mask: np.ndarray | None = None):
+    def __init__(
+        self,
+        layers: list[Layer],
+        screens: ScreenSet,
+        lines_of_sight: list[LineOfSight],
+        grid: PupilGrid,
+        centre_xy_m=(0.0, 0.0),
+        mask: np.ndarray | None = None,
+    ):
         specs = screens.specs
         if len(specs) != len(layers):
             raise ValueError(f"{len(layers)} layers but {len(specs)} screens")
@@ -202,11 +247,16 @@ class Propagator:
             w_lo = self._w0[d, l] + self._beta[d, l] * lo - step * self._step[l, 1]
             w_hi = self._w0[d, l] + self._beta[d, l] * (hi - 1) - step * self._step[l, 1]
             offsets = np.stack([spec.line_offset(ui), spec.line_offset(ui + 1)])  # per grid line
-            if (ui.min() < 0 or ui.max() + 1 >= spec.n_major
-                    or (np.floor(w_lo) - offsets.max(axis=0)).min() < 0
-                    or (np.floor(w_hi) + 1 - offsets.min(axis=0)).max() >= spec.n_minor):
-                raise ValueError(f"footprint at height {layer.height_m} m leaves its screen: "
-                                 "raise turbulence.field_radius_arcsec or shorten the case")
+            if (
+                ui.min() < 0
+                or ui.max() + 1 >= spec.n_major
+                or (np.floor(w_lo) - offsets.max(axis=0)).min() < 0
+                or (np.floor(w_hi) + 1 - offsets.min(axis=0)).max() >= spec.n_minor
+            ):
+                raise ValueError(
+                    f"footprint at height {layer.height_m} m leaves its screen: "
+                    "raise turbulence.field_radius_arcsec or shorten the case"
+                )
         return steps
 
     def sample(self, steps, layer_scales, out: np.ndarray | None = None) -> np.ndarray:
@@ -223,9 +273,24 @@ class Propagator:
             out = np.empty((len(steps), n_los, n, n), dtype=np.float32)
         elif out.shape != (len(steps), n_los, n, n) or out.dtype != np.float32 or not out.flags.c_contiguous:
             raise ValueError(f"out must be C-contiguous float32 of shape {(len(steps), n_los, n, n)}")
-        _sample_kernel(self._screens, self._starts, self._n_major, self._n_minor, self._skew, self._major_axis,
-                       self._step, self._u0, self._w0, self._beta, steps, scales,
-                       *self._column_pairs, self._column_codes, *self._row_pairs, out)
+        _sample_kernel(
+            self._screens,
+            self._starts,
+            self._n_major,
+            self._n_minor,
+            self._skew,
+            self._major_axis,
+            self._step,
+            self._u0,
+            self._w0,
+            self._beta,
+            steps,
+            scales,
+            *self._column_pairs,
+            self._column_codes,
+            *self._row_pairs,
+            out,
+        )
         return out
 
     def sample_valid(self, steps, layer_scales, out: np.ndarray | None = None) -> np.ndarray:

@@ -93,8 +93,9 @@ class TiltRemover:
         phase = np.asarray(phase, dtype=np.float32)
         flat = np.ascontiguousarray(phase.reshape(-1, phase.shape[-1]))
         out = np.empty(flat.shape[0])
-        _tilt_removed_rms(flat, np.asarray(self.x_m, np.float64), np.asarray(self.y_m, np.float64),
-                          self._normal_inverse, out)
+        _tilt_removed_rms(
+            flat, np.asarray(self.x_m, np.float64), np.asarray(self.y_m, np.float64), self._normal_inverse, out
+        )
         return out.reshape(phase.shape[:-1])
 
     @classmethod

@@ -49,6 +49,24 @@ def cos_sin(x, cos_x, sin_x):  # pragma: no cover (jit)
 
 
 # the generated kernels inline sincos: their source (so file and numba cache) follows it
-SINCOS_DIGEST = hashlib.sha256(repr((
-    inspect.getsource(sincos.py_func), _TWO_OVER_PI, _ROUND, _PI_2A, _PI_2B, _PI_2C,
-    _S3, _S5, _S7, _S9, _C2, _C4, _C6, _C8, _C10)).encode()).hexdigest()[:16]
+SINCOS_DIGEST = hashlib.sha256(
+    repr(
+        (
+            inspect.getsource(sincos.py_func),
+            _TWO_OVER_PI,
+            _ROUND,
+            _PI_2A,
+            _PI_2B,
+            _PI_2C,
+            _S3,
+            _S5,
+            _S7,
+            _S9,
+            _C2,
+            _C4,
+            _C6,
+            _C8,
+            _C10,
+        )
+    ).encode()
+).hexdigest()[:16]

@@ -30,8 +30,11 @@ _TAPS = ir.VectorType(ir.IntType(32), simd.LANES)
 def _lerp(builder, grid, first, second, weight, paired):
     """The interpolated values added to ``grid`` (pair association where ``paired``)."""
     step = builder.fsub(second, first)
-    return builder.select(paired, builder.fadd(grid, simd.fmuladd_vector(builder, weight, step, first)),
-                          simd.fmuladd_vector(builder, weight, step, builder.fadd(grid, first)))
+    return builder.select(
+        paired,
+        builder.fadd(grid, simd.fmuladd_vector(builder, weight, step, first)),
+        simd.fmuladd_vector(builder, weight, step, builder.fadd(grid, first)),
+    )
 
 
 def _check(*arrays):
@@ -55,8 +58,9 @@ def row_taps(typingctx, lines, tap, weight, start, count, pair, grid, offset, ro
         raise TypingError("row_taps: lines 2-d, tap int32")
 
     def codegen(context, builder, signature, args):
-        lines_, tap_, weight_, grid_ = (context.make_array(signature.args[i])(context, builder, args[i])
-                                        for i in (0, 1, 2, 6))
+        lines_, tap_, weight_, grid_ = (
+            context.make_array(signature.args[i])(context, builder, args[i]) for i in (0, 1, 2, 6)
+        )
         start, count, pair, offset, row = _integers(context, builder, signature, args, (3, 4, 5, 7, 8))
         lanes = simd.first_lanes(builder, count)
         taps = simd.load(builder, builder.gep(tap_.data, [start]), lanes, _TAPS)
@@ -86,16 +90,20 @@ def column_taps(typingctx, lines, tap, weight, y, grid, offset, codes, count):
         raise TypingError("column_taps: lines 2-d, tap int32, codes int8")
 
     def codegen(context, builder, signature, args):
-        lines_, tap_, weight_, grid_, codes_ = (context.make_array(signature.args[i])(context, builder, args[i])
-                                                for i in (0, 1, 2, 4, 6))
+        lines_, tap_, weight_, grid_, codes_ = (
+            context.make_array(signature.args[i])(context, builder, args[i]) for i in (0, 1, 2, 4, 6)
+        )
         y, offset, count = _integers(context, builder, signature, args, (3, 5, 7))
         code_type = ir.VectorType(ir.IntType(8), simd.LANES)
         code = simd.load(builder, builder.gep(codes_.data, [offset]), simd.first_lanes(builder, count), code_type)
-        active = builder.and_(simd.first_lanes(builder, count),
-                              builder.icmp_unsigned("!=", code, ir.Constant(code_type, [0] * simd.LANES)))
+        active = builder.and_(
+            simd.first_lanes(builder, count),
+            builder.icmp_unsigned("!=", code, ir.Constant(code_type, [0] * simd.LANES)),
+        )
         row = builder.udiv(builder.extract_value(lines_.strides, 0), ir.Constant(_I64, 4))  # floats per line
-        lane_rows = builder.mul(ir.Constant(ir.VectorType(_I64, simd.LANES), list(range(simd.LANES))),
-                                simd.splat(builder, row))
+        lane_rows = builder.mul(
+            ir.Constant(ir.VectorType(_I64, simd.LANES), list(range(simd.LANES))), simd.splat(builder, row)
+        )
         tap = builder.sext(builder.load(builder.gep(tap_.data, [y])), _I64)
         index = builder.trunc(builder.add(lane_rows, simd.splat(builder, tap)), _TAPS)
         first, second = simd.gather_pairs(builder, lines_.data, index, active)

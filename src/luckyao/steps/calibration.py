@@ -14,10 +14,10 @@ import time
 import xarray as xr
 
 from ..seeds import calibration_rng
+from ..studyspec.case import Case, WfsSettings, lgs_from, seeing_from, telescope_from, wfs_from
 from ..wfs.calibration import SlopeResponse, measure_response, reference_spot_spectra
 from ..wfs.centroiders import SlopeEstimator, make_centroider
 from ..wfs.shack_hartmann import ShackHartmann, lgs_elongation_otf
-from ..studyspec.case import Case, WfsSettings, lgs_from, seeing_from, telescope_from, wfs_from
 
 log = logging.getLogger(__name__)
 
@@ -38,25 +38,54 @@ def build_calibration(spec: dict) -> xr.Dataset:
     seeing = seeing_from(spec["atmosphere"], lgs)
     centroider = case_centroider(settings, wfs, elongation, seeing)
     start = time.perf_counter()
-    response = measure_response(wfs, elongation, seeing, centroider, min(lgs.n_beacons, 4), settings.calibration_draws,
-                                calibration_rng(spec["seed"]))
+    response = measure_response(
+        wfs,
+        elongation,
+        seeing,
+        centroider,
+        min(lgs.n_beacons, 4),
+        settings.calibration_draws,
+        calibration_rng(spec["seed"]),
+    )
     seconds = time.perf_counter() - start
-    log.info("%d sub-apertures, %s: mean gains x %.3f, y %.3f (+- %.3f) in %.1f s", wfs.n_valid, settings.centroider,
-             response.matrix[0, 0].mean(), response.matrix[1, 1].mean(), response.matrix_error[0, 0].mean(), seconds)
-    axes = {"output": ("output", ["x", "y"], {"long_name": "measured slope axis"}),
-            "input": ("input", ["x", "y"], {"long_name": "wavefront slope axis"})}
+    log.info(
+        "%d sub-apertures, %s: mean gains x %.3f, y %.3f (+- %.3f) in %.1f s",
+        wfs.n_valid,
+        settings.centroider,
+        response.matrix[0, 0].mean(),
+        response.matrix[1, 1].mean(),
+        response.matrix_error[0, 0].mean(),
+        seconds,
+    )
+    axes = {
+        "output": ("output", ["x", "y"], {"long_name": "measured slope axis"}),
+        "input": ("input", ["x", "y"], {"long_name": "wavefront slope axis"}),
+    }
     return xr.Dataset(
         {
-            "response": (("output", "input", "subaperture"), response.matrix, {
-                "units": "1", "long_name": "measured slope per mean wavefront slope over the sub-aperture, "
-                "mean over turbulence draws and beacons"}),
-            "response_error": (("output", "input", "subaperture"), response.matrix_error, {
-                "units": "1", "long_name": "standard error of the mean response"}),
+            "response": (
+                ("output", "input", "subaperture"),
+                response.matrix,
+                {
+                    "units": "1",
+                    "long_name": "measured slope per mean wavefront slope over the sub-aperture, "
+                    "mean over turbulence draws and beacons",
+                },
+            ),
+            "response_error": (
+                ("output", "input", "subaperture"),
+                response.matrix_error,
+                {"units": "1", "long_name": "standard error of the mean response"},
+            ),
             "subaperture_x_m": ("subaperture", wfs.subaperture_xy_m[:, 0], {"units": "m", "long_name": "centre x"}),
             "subaperture_y_m": ("subaperture", wfs.subaperture_xy_m[:, 1], {"units": "m", "long_name": "centre y"}),
         },
         coords={k: (v[0], v[1], v[2]) for k, v in axes.items()},
-        attrs={"draws": settings.calibration_draws, "beacons_per_draw": min(lgs.n_beacons, 4), "build_seconds": seconds},
+        attrs={
+            "draws": settings.calibration_draws,
+            "beacons_per_draw": min(lgs.n_beacons, 4),
+            "build_seconds": seconds,
+        },
     )
 
 

@@ -14,12 +14,12 @@ import numpy as np
 import xarray as xr
 
 from ..atmosphere.screens import ScreenSet
+from ..io.datasets import open_dataset, require_finite
 from ..progress import Progress
-from ..wfs.sensor import LgsSensor
-from .calibration import slope_estimator
 from ..studyspec.case import Case
 from ..studyspec.products import lgs_chain_config
-from ..io.datasets import open_dataset, require_finite
+from ..wfs.sensor import LgsSensor
+from .calibration import slope_estimator
 
 SLOPE_DIMS = ("exposure", "beacon", "axis", "subaperture")
 
@@ -28,8 +28,16 @@ def lgs_sensor(case: Case, screens: ScreenSet, seed: int, calibration=None) -> L
     """The case's LGS sensor, its slopes calibrated by ``calibration``
     (:func:`.calibration.build_calibration`) when the case asks for it."""
     wfs = case.wfs
-    sensor = LgsSensor(case.lgs, case.shack_hartmann(), wfs.exposure_steps, list(case.layers), screens, seed,
-                       wfs.photons_per_subaperture, wfs.read_noise_e)
+    sensor = LgsSensor(
+        case.lgs,
+        case.shack_hartmann(),
+        wfs.exposure_steps,
+        list(case.layers),
+        screens,
+        seed,
+        wfs.photons_per_subaperture,
+        wfs.read_noise_e,
+    )
     sensor.estimator = slope_estimator(case, sensor.wfs, sensor.elongation, calibration)
     return sensor
 
@@ -48,17 +56,26 @@ def measure_lgs_slopes(spec: dict, screens: ScreenSet, calibration: xr.Dataset |
         steps = clock.steps(frame)
         layer_scales = case.layer_scales(steps)
         for i in clock.exposure_offsets():
-            exposure = sensor.exposure_slopes(steps[i:i + e], layer_scales[i:i + e])
+            exposure = sensor.exposure_slopes(steps[i : i + e], layer_scales[i : i + e])
             if slopes is None:
                 slopes = np.empty((clock.n_exposures,) + exposure.shape, exposure.dtype)
             slopes[clock.exposure(steps[i])] = exposure
         require_finite(slopes[clock.frame_exposures(frame)], f"LGS slopes of frame {frame}", "slopes", SLOPE_DIMS)
         progress.update(frame + 1)
     return xr.Dataset(
-        {"slopes_rad": (SLOPE_DIMS, slopes, {
-            "units": "rad", "long_name": "tilt-removed LGS WFS slopes of each exposure (exposure_steps time steps "
-            "from exposure * exposure_steps), in the units the tomography assumes"})},
-        attrs={"exposure_steps": e})
+        {
+            "slopes_rad": (
+                SLOPE_DIMS,
+                slopes,
+                {
+                    "units": "rad",
+                    "long_name": "tilt-removed LGS WFS slopes of each exposure (exposure_steps time steps "
+                    "from exposure * exposure_steps), in the units the tomography assumes",
+                },
+            )
+        },
+        attrs={"exposure_steps": e},
+    )
 
 
 class RecordedSlopes:
@@ -77,8 +94,10 @@ class RecordedSlopes:
         product = open_dataset(path, "LGS slopes", allow_nan=())
         spec = json.loads(product.attrs["config_json"])
         if spec["case"] != lgs_chain_config(config) or spec["seed"] != seed:
-            raise ValueError(f"'{path}' was not measured with this case's LGS chain and seed {seed}: "
-                             "its slopes cannot stand for this case's")
+            raise ValueError(
+                f"'{path}' was not measured with this case's LGS chain and seed {seed}: "
+                "its slopes cannot stand for this case's"
+            )
         return cls(product["slopes_rad"].values, int(product.attrs["exposure_steps"]))
 
     def exposure_slopes(self, steps, layer_scales) -> np.ndarray:

@@ -13,14 +13,14 @@ import logging
 import numpy as np
 import xarray as xr
 
+from ..io.datasets import iter_frame_blocks, open_dataset, provenance, require_finite_lucky, write_dataset
 from ..lucky.accumulation import batch_mean_error
 from ..lucky.pipeline import ImageReference, run_lucky_methods
 from ..lucky.ranking import ExternalCriterion
 from ..seeds import target_seed
-from ..io.datasets import iter_frame_blocks, open_dataset, provenance, require_finite_lucky, write_dataset
 from ..studyspec.lucky_settings import LuckySettings
-from .simulation import Replay
 from .screens import read_screens
+from .simulation import Replay
 
 log = logging.getLogger(__name__)
 
@@ -32,8 +32,9 @@ EXTERNAL_CRITERIA = (
 also the oracle ``true_rms``, the true corrected tilt-removed rms (a bound, not observable)."""
 
 
-def _frames_of(settings: LuckySettings, telemetry: xr.Dataset, target: int, frames_path, screens_path,
-               screens_metadata_path):
+def _frames_of(
+    settings: LuckySettings, telemetry: xr.Dataset, target: int, frames_path, screens_path, screens_metadata_path
+):
     """A target's frames for :func:`.pipeline.run_lucky_methods`: stored, or replayed from the screens and
     the recorded DM commands (:class:`.simulation.Replay`, whose values on the axis the caller
     reads once they are made); the replay, or None."""
@@ -53,16 +54,27 @@ def _frames_of(settings: LuckySettings, telemetry: xr.Dataset, target: int, fram
 
 def _external_criteria(telemetry: xr.Dataset, target: int) -> list[ExternalCriterion]:
     """The target's selection criteria from the telemetry (:data:`EXTERNAL_CRITERIA`, and the oracle)."""
-    external = [ExternalCriterion(name, telemetry[f"{name}_nm"].values[target], False, "nm", long_name)
-                for name, long_name in EXTERNAL_CRITERIA if f"{name}_nm" in telemetry]
+    external = [
+        ExternalCriterion(name, telemetry[f"{name}_nm"].values[target], False, "nm", long_name)
+        for name, long_name in EXTERNAL_CRITERIA
+        if f"{name}_nm" in telemetry
+    ]
     if "lgs_residual_rms_nm" in telemetry:
-        external.append(ExternalCriterion("true_rms", telemetry.true_rms_nm.values[target], False, "nm",
-                                          "true corrected tilt-removed rms along the target (oracle)"))
+        external.append(
+            ExternalCriterion(
+                "true_rms",
+                telemetry.true_rms_nm.values[target],
+                False,
+                "nm",
+                "true corrected tilt-removed rms along the target (oracle)",
+            )
+        )
     return external
 
 
-def lucky_case(settings_config: dict, frames_path, telemetry_path, out_path, screens_path="",
-               screens_metadata_path="") -> None:
+def lucky_case(
+    settings_config: dict, frames_path, telemetry_path, out_path, screens_path="", screens_metadata_path=""
+) -> None:
     """Write one case's ``lucky.nc``; ``settings_config`` from ``studyspec.lucky.lucky_settings``. The
     targets the simulation did not image (:func:`luckyao.studyspec.resolved.imaged_targets`) are replayed
     from the screens with the recorded DM commands (:class:`.simulation.Replay`)."""
@@ -72,8 +84,9 @@ def lucky_case(settings_config: dict, frames_path, telemetry_path, out_path, scr
     n_blocks, reference = settings.error_blocks, settings.reference_target
     peak = float(telemetry.attrs["diffraction_limited_peak"])
     axis_strehl = telemetry.axis_strehl.values.copy()  # (target, frame); the replayed targets' filled below
-    order = list(range(n_targets)) if reference is None else [reference] + [
-        t for t in range(n_targets) if t != reference]  # the star first: the others take its measurements
+    order = (
+        list(range(n_targets)) if reference is None else [reference] + [t for t in range(n_targets) if t != reference]
+    )  # the star first: the others take its measurements
     registrations, matched_strehl = settings.registration_methods(), settings.matched_strehl()
     per_target = {}  # target -> its datasets, one per registration method (all made in the same passes)
     for target in order:
@@ -81,40 +94,87 @@ def lucky_case(settings_config: dict, frames_path, telemetry_path, out_path, scr
         references = None if reference in (None, target) else [ImageReference.of(ds) for ds in per_target[reference]]
         frames, replay = _frames_of(settings, telemetry, target, frames_path, screens_path, screens_metadata_path)
         per_target[target] = run_lucky_methods(
-            frames, n_frames, settings.detectors, settings.fractions, peak,
-            settings.case.camera.pixel_scale_arcsec, target_seed(settings.seed, target),
-            criteria_external=_external_criteria(telemetry, target), references=references,
-            n_blocks=n_blocks, image_crop_px=settings.image_crop_px, registrations=registrations,
-            matched_strehl=matched_strehl)
+            frames,
+            n_frames,
+            settings.detectors,
+            settings.fractions,
+            peak,
+            settings.case.camera.pixel_scale_arcsec,
+            target_seed(settings.seed, target),
+            criteria_external=_external_criteria(telemetry, target),
+            references=references,
+            n_blocks=n_blocks,
+            image_crop_px=settings.image_crop_px,
+            registrations=registrations,
+            matched_strehl=matched_strehl,
+        )
         if replay is not None:
             axis_strehl[target] = replay.axis_strehl[0]
-    per_registration = [xr.concat([per_target[t][m] for t in range(n_targets)], dim="target", data_vars="all",
-                                  coords="minimal", compat="override") for m in range(len(registrations))]
+    per_registration = [
+        xr.concat(
+            [per_target[t][m] for t in range(n_targets)],
+            dim="target",
+            data_vars="all",
+            coords="minimal",
+            compat="override",
+        )
+        for m in range(len(registrations))
+    ]
     ds = xr.concat(per_registration, dim="registration", data_vars="all", coords="minimal", compat="override")
-    ds = ds.assign_coords(registration=("registration", list(settings.registrations), {
-        "units": "1", "long_name": "registration method of the frames (recentring 'cog' of the long exposure: "
-                                   "registered by this method)"}))
+    ds = ds.assign_coords(
+        registration=(
+            "registration",
+            list(settings.registrations),
+            {
+                "units": "1",
+                "long_name": "registration method of the frames (recentring 'cog' of the long exposure: "
+                "registered by this method)",
+            },
+        )
+    )
     ds.attrs.pop("frames_drawn_again", None)  # per target: in its log line
-    ds["reference_target"] = ((), -1 if reference is None else reference, {
-        "units": "1", "long_name": "target whose frames give every target its image criteria and recentring "
-                                  "(-1: each target its own)"})
+    ds["reference_target"] = (
+        (),
+        -1 if reference is None else reference,
+        {
+            "units": "1",
+            "long_name": "target whose frames give every target its image criteria and recentring "
+            "(-1: each target its own)",
+        },
+    )
     errors = [batch_mean_error(axis_strehl[t], n_blocks) for t in range(ds.sizes["target"])]
-    ds["long_exposure_strehl_error"] = ("target", errors, {
-        "units": "1", "long_name": f"Monte-Carlo standard error of the long-exposure Strehl (no recentring), "
-                                   f"from {n_blocks} batch means"})
+    ds["long_exposure_strehl_error"] = (
+        "target",
+        errors,
+        {
+            "units": "1",
+            "long_name": f"Monte-Carlo standard error of the long-exposure Strehl (no recentring), "
+            f"from {n_blocks} batch means",
+        },
+    )
     values = ds.frame_recentred_strehl.transpose("registration", "target", "detector", "frame").values
     recentred = np.apply_along_axis(batch_mean_error, -1, values, n_blocks)  # (registration, target, detector)
-    ds["recentred_long_exposure_strehl_error"] = (("registration", "target", "detector"), recentred, {
-        "units": "1", "long_name": f"Monte-Carlo standard error of the recentred long-exposure Strehl, "
-                                   f"from {n_blocks} batch means"})
+    ds["recentred_long_exposure_strehl_error"] = (
+        ("registration", "target", "detector"),
+        recentred,
+        {
+            "units": "1",
+            "long_name": f"Monte-Carlo standard error of the recentred long-exposure Strehl, "
+            f"from {n_blocks} batch means",
+        },
+    )
     for name in ("true_rms_nm", "lgs_rms_nm", "lgs_residual_rms_nm", "transmitted_flux"):
         if name in telemetry:
             ds[name] = telemetry[name]
-    ds["mean_r0_500nm_m"] = ((), float(telemetry.r0_500nm_m.mean()),
-                             {"units": "m", "long_name": "mean Fried parameter at 500 nm over the case"})
+    ds["mean_r0_500nm_m"] = (
+        (),
+        float(telemetry.r0_500nm_m.mean()),
+        {"units": "m", "long_name": "mean Fried parameter at 500 nm over the case"},
+    )
     ds = ds.assign_coords(target_x_arcsec=telemetry.target_x_arcsec, target_y_arcsec=telemetry.target_y_arcsec)
-    ds.attrs.update(provenance(f"luckyao lucky imaging of case {settings.case_name}", settings.case_config,
-                               settings.seed))
+    ds.attrs.update(
+        provenance(f"luckyao lucky imaging of case {settings.case_name}", settings.case_config, settings.seed)
+    )
     ds.attrs["case"] = settings.case_name
     ds.attrs["lucky_settings_json"] = settings.settings_json
     ds.attrs["telemetry_config_sha256"] = telemetry.attrs["config_sha256"]

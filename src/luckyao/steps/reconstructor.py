@@ -16,9 +16,9 @@ import numpy as np
 import xarray as xr
 
 from ..ao.control import command_matrix, dm_slopes_matrix
+from ..studyspec.case import ao_from, lgs_from, targets_from, telescope_from, tomography_from, wfs_from
 from ..tomography.reconstructor import factorize, reconstruction_points, target_reconstructor
 from ..tomography.slopes import SlopeGeometry, slope_covariance
-from ..studyspec.case import ao_from, lgs_from, targets_from, telescope_from, tomography_from, wfs_from
 
 log = logging.getLogger(__name__)
 
@@ -38,14 +38,15 @@ def build_reconstructors(spec: dict) -> xr.Dataset:
     matrices = []
     for target in targets_from(spec["targets_arcsec"]):
         direction = (target.theta_x_rad, target.theta_y_rad)
-        matrices.append(target_reconstructor(prior, geometry, noise_rad, points, direction,
-                                             cholesky_lower=cholesky))
+        matrices.append(target_reconstructor(prior, geometry, noise_rad, points, direction, cholesky_lower=cholesky))
     log.info("%d targets x %d points: built in %.1f s", len(matrices), len(points), time.perf_counter() - start)
     return xr.Dataset(
         {
-            "reconstructor": (("target", "point", "slope"), np.stack(matrices).astype(np.float32),
-                              {"units": "m rad-1", "long_name": "tilt-removed slopes to tilt-removed optical "
-                               "path along the target"}),
+            "reconstructor": (
+                ("target", "point", "slope"),
+                np.stack(matrices).astype(np.float32),
+                {"units": "m rad-1", "long_name": "tilt-removed slopes to tilt-removed optical path along the target"},
+            ),
             "point_x_m": ("point", points[:, 0], {"units": "m", "long_name": "reconstruction point x"}),
             "point_y_m": ("point", points[:, 1], {"units": "m", "long_name": "reconstruction point y"}),
         },
@@ -63,16 +64,30 @@ def build_commands(spec: dict) -> xr.Dataset:
     dm = ao.deformable_mirror(telescope)
     geometry = SlopeGeometry.from_wfs(wfs, lgs)
     start = time.perf_counter()
-    matrix = command_matrix(tomography.prior, geometry, tomography.noise_rms_rad, dm, ao.mode,
-                            ao.correction_direction_rad, ao.glao_max_height_m)
-    log.info("%s: %d actuators x %d slopes in %.1f s", ao.mode, dm.n_valid, geometry.n_slopes,
-             time.perf_counter() - start)
+    matrix = command_matrix(
+        tomography.prior,
+        geometry,
+        tomography.noise_rms_rad,
+        dm,
+        ao.mode,
+        ao.correction_direction_rad,
+        ao.glao_max_height_m,
+    )
+    log.info(
+        "%s: %d actuators x %d slopes in %.1f s", ao.mode, dm.n_valid, geometry.n_slopes, time.perf_counter() - start
+    )
     return xr.Dataset(
         {
-            "command_matrix": (("actuator", "slope"), matrix, {
-                "units": "m rad-1", "long_name": "tilt-removed LGS slopes to DM commands (optical path)"}),
-            "dm_slopes": (("slope", "actuator"), dm_slopes_matrix(dm, wfs, lgs.n_beacons), {
-                "units": "rad m-1", "long_name": "tilt-removed slopes every LGS WFS sees per DM command"}),
+            "command_matrix": (
+                ("actuator", "slope"),
+                matrix,
+                {"units": "m rad-1", "long_name": "tilt-removed LGS slopes to DM commands (optical path)"},
+            ),
+            "dm_slopes": (
+                ("slope", "actuator"),
+                dm_slopes_matrix(dm, wfs, lgs.n_beacons),
+                {"units": "rad m-1", "long_name": "tilt-removed slopes every LGS WFS sees per DM command"},
+            ),
             "actuator_x_m": ("actuator", dm.actuator_xy_m[:, 0], {"units": "m", "long_name": "actuator x"}),
             "actuator_y_m": ("actuator", dm.actuator_xy_m[:, 1], {"units": "m", "long_name": "actuator y"}),
         },

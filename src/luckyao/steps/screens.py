@@ -17,9 +17,9 @@ import xarray as xr
 
 from ..atmosphere.screens import ScreenSet, StripSpec, strip_screen, strip_spec
 from ..atmosphere.statistics import Layer
+from ..io.datasets import atomic_path, open_dataset, require_finite, set_aside, write_dataset
 from ..seeds import screen_rng
 from ..units import ARCSEC_RAD
-from ..io.datasets import atomic_path, open_dataset, require_finite, set_aside, write_dataset
 
 log = logging.getLogger(__name__)
 
@@ -45,9 +45,20 @@ class TurbulenceSpec:
     @classmethod
     def from_config(cls, spec: dict) -> "TurbulenceSpec":
         """From a ``studyspec.products.turbulence_spec`` dict."""
-        return cls(spec["seed"], spec["duration_s"], spec["time_step_s"], spec["max_pixel_m"], spec["diameter_m"],
-                   spec["field_radius_arcsec"], spec["min_along_m"], spec["min_across_m"], spec["outer_scale_m"],
-                   tuple(spec["height_m"]), tuple(spec["wind_speed_m_s"]), tuple(spec["wind_direction_deg"]))
+        return cls(
+            spec["seed"],
+            spec["duration_s"],
+            spec["time_step_s"],
+            spec["max_pixel_m"],
+            spec["diameter_m"],
+            spec["field_radius_arcsec"],
+            spec["min_along_m"],
+            spec["min_across_m"],
+            spec["outer_scale_m"],
+            tuple(spec["height_m"]),
+            tuple(spec["wind_speed_m_s"]),
+            tuple(spec["wind_direction_deg"]),
+        )
 
     @property
     def n_steps(self) -> int:
@@ -62,8 +73,11 @@ def strip_specs(spec: TurbulenceSpec) -> list[StripSpec]:
         layer = Layer(height, 1.0, speed, direction)
         # square pupil grids reach sqrt(2) D / 2 in their corners
         radius = 0.75 * spec.diameter_m + spec.field_radius_arcsec * ARCSEC_RAD * height
-        specs.append(strip_spec(layer, spec.time_step_s, spec.n_steps, spec.max_pixel_m, radius,
-                                spec.min_along_m, spec.min_across_m))
+        specs.append(
+            strip_spec(
+                layer, spec.time_step_s, spec.n_steps, spec.max_pixel_m, radius, spec.min_along_m, spec.min_across_m
+            )
+        )
     return specs
 
 
@@ -85,9 +99,16 @@ def write_screens(spec_config: dict, screens_path, metadata_path, attrs: dict, t
             begin = time.perf_counter()
             s = specs[i]
             screen = strip_screen(s, spec.outer_scale_m, screen_rng(spec.seed, i))
-            out[starts[i]:starts[i] + sizes[i]] = screen.ravel()
-            log.info("layer %d/%d: %d x %d samples of %.4f m in %.1f s", i + 1, len(specs),
-                     s.n_major, s.n_minor, s.dx_m, time.perf_counter() - begin)
+            out[starts[i] : starts[i] + sizes[i]] = screen.ravel()
+            log.info(
+                "layer %d/%d: %d x %d samples of %.4f m in %.1f s",
+                i + 1,
+                len(specs),
+                s.n_major,
+                s.n_minor,
+                s.dx_m,
+                time.perf_counter() - begin,
+            )
 
         with ThreadPoolExecutor(max(1, threads)) as pool:
             list(pool.map(generate, sorted(range(len(specs)), key=lambda i: -sizes[i]), [flat] * len(specs)))
@@ -99,18 +120,36 @@ def write_screens(spec_config: dict, screens_path, metadata_path, attrs: dict, t
             "dx_m": ("layer", [s.dx_m for s in specs], {"units": "m", "long_name": "screen sample spacing"}),
             "n_major": ("layer", [s.n_major for s in specs], {"units": "1", "long_name": "lines along the major axis"}),
             "n_minor": ("layer", [s.n_minor for s in specs], {"units": "1", "long_name": "samples per line"}),
-            "major_axis": ("layer", [s.major_axis for s in specs],
-                           {"units": "1", "long_name": "sky axis of the strip's lines (0: x, 1: y)"}),
-            "skew": ("layer", [s.skew for s in specs],
-                     {"units": "1", "long_name": "minor offset of line i is floor(skew i / n_major) samples"}),
-            "origin_major_m": ("layer", [s.origin_m[0] for s in specs],
-                               {"units": "m", "long_name": "major-axis position of sample [0, 0] at t = 0"}),
-            "origin_minor_m": ("layer", [s.origin_m[1] for s in specs],
-                               {"units": "m", "long_name": "minor-axis position of sample [0, 0] at t = 0"}),
-            "step_major": ("layer", [s.step_samples[0] for s in specs],
-                           {"units": "1", "long_name": "frozen-flow shift per time step along the major axis, samples"}),
-            "step_minor": ("layer", [s.step_samples[1] for s in specs],
-                           {"units": "1", "long_name": "frozen-flow shift per time step along the minor axis, samples"}),
+            "major_axis": (
+                "layer",
+                [s.major_axis for s in specs],
+                {"units": "1", "long_name": "sky axis of the strip's lines (0: x, 1: y)"},
+            ),
+            "skew": (
+                "layer",
+                [s.skew for s in specs],
+                {"units": "1", "long_name": "minor offset of line i is floor(skew i / n_major) samples"},
+            ),
+            "origin_major_m": (
+                "layer",
+                [s.origin_m[0] for s in specs],
+                {"units": "m", "long_name": "major-axis position of sample [0, 0] at t = 0"},
+            ),
+            "origin_minor_m": (
+                "layer",
+                [s.origin_m[1] for s in specs],
+                {"units": "m", "long_name": "minor-axis position of sample [0, 0] at t = 0"},
+            ),
+            "step_major": (
+                "layer",
+                [s.step_samples[0] for s in specs],
+                {"units": "1", "long_name": "frozen-flow shift per time step along the major axis, samples"},
+            ),
+            "step_minor": (
+                "layer",
+                [s.step_samples[1] for s in specs],
+                {"units": "1", "long_name": "frozen-flow shift per time step along the minor axis, samples"},
+            ),
             "start": ("layer", starts, {"units": "1", "long_name": "offset of the layer in the flat screen file"}),
         },
         coords={"layer": layer},
@@ -123,11 +162,17 @@ def read_screens(screens_path, metadata_path) -> ScreenSet:
     """The screens, memory-mapped read-only, with their geometry."""
     meta = open_dataset(metadata_path, "turbulence metadata", allow_nan=())
     specs = tuple(
-        StripSpec(dx_m=float(meta.dx_m[i]), n_major=int(meta.n_major[i]), n_minor=int(meta.n_minor[i]),
-                  major_axis=int(meta.major_axis[i]), skew=int(meta.skew[i]),
-                  origin_m=(float(meta.origin_major_m[i]), float(meta.origin_minor_m[i])),
-                  step_samples=(float(meta.step_major[i]), float(meta.step_minor[i])))
-        for i in range(meta.sizes["layer"]))
+        StripSpec(
+            dx_m=float(meta.dx_m[i]),
+            n_major=int(meta.n_major[i]),
+            n_minor=int(meta.n_minor[i]),
+            major_axis=int(meta.major_axis[i]),
+            skew=int(meta.skew[i]),
+            origin_m=(float(meta.origin_major_m[i]), float(meta.origin_minor_m[i])),
+            step_samples=(float(meta.step_major[i]), float(meta.step_minor[i])),
+        )
+        for i in range(meta.sizes["layer"])
+    )
     try:
         flat = np.load(screens_path, mmap_mode="r")
     except FileNotFoundError as err:
@@ -136,11 +181,16 @@ def read_screens(screens_path, metadata_path) -> ScreenSet:
         raise OSError(set_aside(screens_path, f"turbulence file '{screens_path}' is corrupt ({err})")) from err
     expected = int(meta.start[-1]) + specs[-1].n_major * specs[-1].n_minor
     if flat.dtype != np.float32 or flat.shape != (expected,):
-        raise OSError(set_aside(screens_path, f"turbulence file '{screens_path}' holds {flat.shape} {flat.dtype}, "
-                                              f"its metadata expects ({expected},) float32"))
+        raise OSError(
+            set_aside(
+                screens_path,
+                f"turbulence file '{screens_path}' holds {flat.shape} {flat.dtype}, "
+                f"its metadata expects ({expected},) float32",
+            )
+        )
     for begin in range(0, flat.size, 1 << 24):  # memory-mapped: check in 64 MB chunks
         try:
-            require_finite(flat[begin:begin + (1 << 24)], f"turbulence file '{screens_path}'", "screens")
+            require_finite(flat[begin : begin + (1 << 24)], f"turbulence file '{screens_path}'", "screens")
         except ValueError as err:
             raise ValueError(set_aside(screens_path, f"{err} (offset from {begin})")) from None
     return ScreenSet(specs, flat, meta.start.values.astype(np.int64))

@@ -21,22 +21,23 @@ import xarray as xr
 from ..ao.apodisation import Apodiser, DelayedApodisation, SubapertureRegions
 from ..ao.correction import DelayedDm, OpenLoopCorrection
 from ..atmosphere.screens import ScreenSet
+from ..io.datasets import open_dataset, require_finite
 from ..optics.imaging import Imager
 from ..optics.propagation import Propagator
 from ..optics.pupil import TiltRemover
 from ..progress import Progress
+from ..studyspec.case import Case
+from ..studyspec.products import lgs_spec
 from ..tomography.criterion import LgsRmsEstimator, lucky_frame_rms_nm
 from ..tomography.reconstructor import reconstruction_points
 from ..units import ARCSEC_RAD, REFERENCE_WAVELENGTH_M, phase_rad_to_nm
 from ..wfs.sensor import LgsSensor
-from ..studyspec.case import Case
-from ..studyspec.products import lgs_spec
-from ..io.datasets import open_dataset, require_finite
 from .lgs_slopes import lgs_sensor
 
 
-def lgs_chain(case: Case, screens: ScreenSet, reconstructors: np.ndarray,
-              seed: int, calibration=None) -> tuple[LgsSensor, LgsRmsEstimator]:
+def lgs_chain(
+    case: Case, screens: ScreenSet, reconstructors: np.ndarray, seed: int, calibration=None
+) -> tuple[LgsSensor, LgsRmsEstimator]:
     """The case's LGS sensor (:func:`.lgs_slopes.lgs_sensor`) and its estimator (``reconstructors``
     (target, point, slope))."""
     sensor = lgs_sensor(case, screens, seed, calibration)
@@ -50,8 +51,10 @@ def twin_lgs_rms_nm(path, config: dict, seed: int) -> np.ndarray:
     telemetry = open_dataset(path, "LGS twin telemetry", allow_nan={"axis_strehl", "lgs_residual_rms_nm"})
     twin = json.loads(telemetry.attrs["config_json"])
     if lgs_spec(twin) != lgs_spec(config) or int(telemetry.attrs["seed"]) != seed:
-        raise ValueError(f"'{path}' was not measured with this case's LGS chain and seed {seed}: "
-                         f"its lgs_rms cannot stand for this case's")
+        raise ValueError(
+            f"'{path}' was not measured with this case's LGS chain and seed {seed}: "
+            f"its lgs_rms cannot stand for this case's"
+        )
     return telemetry["lgs_rms_nm"].values
 
 
@@ -66,8 +69,9 @@ class SciencePath:
         self.case = case
         self.imager = imager = Imager(case.telescope, case.camera)
         self.targets, self.imaged = list(targets), list(imaged)
-        self.propagator = Propagator(list(case.layers), screens, [case.targets[t] for t in self.targets],
-                                     imager.grid, mask=imager.mask)
+        self.propagator = Propagator(
+            list(case.layers), screens, [case.targets[t] for t in self.targets], imager.grid, mask=imager.mask
+        )
         self.tilt = TiltRemover.for_mask(imager.grid, imager.mask)
         self.to_camera = np.float32(REFERENCE_WAVELENGTH_M / case.camera.wavelength_m)
         self._all_imaged = self.imaged == list(range(len(self.targets)))
@@ -79,9 +83,15 @@ class SciencePath:
         ao, telescope = self.case.ao, self.case.telescope
         return ao.deformable_mirror(telescope).grid_surface(self.imager.grid, self.imager.mask)
 
-    def frame(self, frame: int, steps: np.ndarray, layer_scales: np.ndarray, dm=None,
-              truth: bool = True, apodisation: DelayedApodisation | None = None
-              ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    def frame(
+        self,
+        frame: int,
+        steps: np.ndarray,
+        layer_scales: np.ndarray,
+        dm=None,
+        truth: bool = True,
+        apodisation: DelayedApodisation | None = None,
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
         """The frame's images (imaged, n, n) float32 (the mean of its steps' images, of unit
         flux for the full pupil), their value on the axis (imaged,) (:meth:`Imager.axis_value`)
         and, with ``truth``, the tilt-removed rms (targets,) [rad at 500 nm] of its residual
@@ -102,12 +112,19 @@ class SciencePath:
             if dm is not None:
                 phase_500 = phase_500 - dm.surface_at(int(step))
             imaged = phase_500 if self._all_imaged else phase_500[self.imaged]
-            self.imager.accumulate(imaged * self.to_camera, self._intensity,
-                                   None if transmission is None else np.broadcast_to(transmission, imaged.shape))
+            self.imager.accumulate(
+                imaged * self.to_camera,
+                self._intensity,
+                None if transmission is None else np.broadcast_to(transmission, imaged.shape),
+            )
             if truth:
                 rms2 += self.tilt.rms(phase_500) ** 2
         images = self.imager.to_pixels(self._intensity / self.case.steps_per_frame)
-        return images, self.imager.axis_value(images), None if rms2 is None else np.sqrt(rms2 / self.case.steps_per_frame)
+        return (
+            images,
+            self.imager.axis_value(images),
+            None if rms2 is None else np.sqrt(rms2 / self.case.steps_per_frame),
+        )
 
     def apodisation(self, dm: DelayedDm) -> DelayedApodisation | None:
         """The case's adaptive apodisation of this path's pupil, timed by ``dm`` (None without)."""
@@ -122,23 +139,34 @@ class SciencePath:
         if self._oracle:
             return DelayedApodisation(apodiser, dm, self.tilt)
         points = self.reconstruction_points()
-        return DelayedApodisation(apodiser, dm, self.tilt, regions.labels(points[:, 0], points[:, 1]),
-                                  TiltRemover(points[:, 0], points[:, 1]))
+        return DelayedApodisation(
+            apodiser, dm, self.tilt, regions.labels(points[:, 0], points[:, 1]), TiltRemover(points[:, 0], points[:, 1])
+        )
 
     def reconstruction_points(self) -> np.ndarray:
         """The LGS reconstructors' pupil points (n_points, 2) [m] (``study.reconstructor``)."""
         case = self.case
-        return reconstruction_points(case.telescope, case.shack_hartmann().subaperture_m,
-                                     case.tomography.points_per_subaperture)
+        return reconstruction_points(
+            case.telescope, case.shack_hartmann().subaperture_m, case.tomography.points_per_subaperture
+        )
 
 
-def simulate(case: Case, screens: ScreenSet, write_frames, sensor: LgsSensor | None = None,
-             estimator: LgsRmsEstimator | None = None, commands: tuple[np.ndarray, np.ndarray] | None = None,
-             imaged_targets=None, block_frames: int = 32, lgs_rms_nm: np.ndarray | None = None) -> xr.Dataset:
+def simulate(
+    case: Case,
+    screens: ScreenSet,
+    write_frames,
+    sensor: LgsSensor | None = None,
+    estimator: LgsRmsEstimator | None = None,
+    commands: tuple[np.ndarray, np.ndarray] | None = None,
+    imaged_targets=None,
+    block_frames: int = 32,
+    lgs_rms_nm: np.ndarray | None = None,
+) -> xr.Dataset:
     """Run the case; ``write_frames(start, frames (imaged target, k, n, n))`` receives the
     noiseless unit-flux frames of ``imaged_targets`` (indices into ``case.targets``,
     default all; every target gets its truth). Returns the telemetry dataset. With an LGS
-    ``sensor`` (or its recorded slopes, :class:`.lgs_slopes.RecordedSlopes`) and its ``estimator``, each frame also gets its ``lgs_rms_nm``; a case
+    ``sensor`` (or its recorded slopes, :class:`.lgs_slopes.RecordedSlopes`) and its ``estimator``, each frame also
+    gets its ``lgs_rms_nm``; a case
     without AO may instead be given them (target, frame), as measured by a case with the
     same LGS chain (:func:`luckyao.studyspec.products.lgs_twin`);
     with ``commands`` (the command matrix and the DM slopes of the case's
@@ -154,21 +182,24 @@ def simulate(case: Case, screens: ScreenSet, write_frames, sensor: LgsSensor | N
     """
     n_targets, n_frames, spf, clock = len(case.targets), case.n_frames, case.steps_per_frame, case.clock
     if sensor is not None and sensor.exposure_steps != clock.exposure_steps:
-        raise ValueError(f"the LGS sensor's exposures are {sensor.exposure_steps} steps, the case's "
-                         f"{clock.exposure_steps}")
+        raise ValueError(
+            f"the LGS sensor's exposures are {sensor.exposure_steps} steps, the case's {clock.exposure_steps}"
+        )
     imaged = list(range(n_targets)) if imaged_targets is None else sorted(imaged_targets)
     science = SciencePath(case, screens, range(n_targets), imaged)
     imager = science.imager
     correction = apodisation = None
     if commands is not None:
-        correction = OpenLoopCorrection(*commands, science.dm_surface(), clock.exposure_steps,
-                                        case.ao.delay_steps, spf)
+        correction = OpenLoopCorrection(*commands, science.dm_surface(), clock.exposure_steps, case.ao.delay_steps, spf)
         dm_commands = np.empty((clock.n_exposures, correction.dm.n_actuators), np.float32)
         apodisation = science.apodisation(correction.dm)
         if apodisation is not None and apodisation.point_labels is not None:  # LGS driver
             points = science.reconstruction_points()
-            dm_at_points = case.ao.deformable_mirror(case.telescope).influence_matrix(
-                points[:, 0], points[:, 1]).astype(np.float32)  # (n_points, n_act) [m / m]
+            dm_at_points = (
+                case.ao.deformable_mirror(case.telescope)
+                .influence_matrix(points[:, 0], points[:, 1])
+                .astype(np.float32)
+            )  # (n_points, n_act) [m / m]
     steps_max = science.propagator.n_steps_max
     if sensor is not None:
         steps_max = min(steps_max, sensor.n_steps_max)
@@ -181,8 +212,10 @@ def simulate(case: Case, screens: ScreenSet, write_frames, sensor: LgsSensor | N
     axis_strehl = np.full((n_targets, n_frames), np.nan, dtype=np.float32)
     if lgs_rms_nm is not None:
         if sensor is not None or commands is not None or np.shape(lgs_rms_nm) != (n_targets, n_frames):
-            raise ValueError(f"given LGS telemetry needs a case without AO or sensor and shape "
-                             f"{(n_targets, n_frames)}, got {np.shape(lgs_rms_nm)}")
+            raise ValueError(
+                f"given LGS telemetry needs a case without AO or sensor and shape "
+                f"{(n_targets, n_frames)}, got {np.shape(lgs_rms_nm)}"
+            )
         lgs_rms = np.asarray(lgs_rms_nm, dtype=np.float32)
     else:
         lgs_rms = np.full((n_targets, n_frames), np.nan, dtype=np.float32)
@@ -199,22 +232,32 @@ def simulate(case: Case, screens: ScreenSet, write_frames, sensor: LgsSensor | N
             if sensor is not None:  # LGS sensor -> estimator (-> correction); a frame holds whole exposures
                 e = clock.exposure_steps
                 starts = clock.exposure_starts(steps)
-                slopes = np.stack([sensor.exposure_slopes(steps[i:i + e], layer_scales[i:i + e])
-                                   for i in clock.exposure_offsets()])
-                require_finite(slopes, f"LGS slopes of frame {frame}", "slopes",
-                               ("exposure", "beacon", "axis", "subaperture"))
+                slopes = np.stack(
+                    [
+                        sensor.exposure_slopes(steps[i : i + e], layer_scales[i : i + e])
+                        for i in clock.exposure_offsets()
+                    ]
+                )
+                require_finite(
+                    slopes, f"LGS slopes of frame {frame}", "slopes", ("exposure", "beacon", "axis", "subaperture")
+                )
                 lgs_rms[:, frame] = lucky_frame_rms_nm(estimator.rms_nm(slopes))
                 if correction is not None:
                     for start_step, exposure in zip(starts, slopes):
                         dm_commands[clock.exposure(start_step)] = correction.measure(int(start_step), exposure)
                         if apodisation is not None and apodisation.point_labels is not None:
-                            apodisation.from_estimate(int(start_step), estimator.reconstructors[0] @ exposure.ravel(),
-                                                      dm_at_points @ dm_commands[clock.exposure(start_step)])
-                    residual = np.stack([correction.residual_slopes(int(s), exposure)
-                                         for s, exposure in zip(starts, slopes)])
+                            apodisation.from_estimate(
+                                int(start_step),
+                                estimator.reconstructors[0] @ exposure.ravel(),
+                                dm_at_points @ dm_commands[clock.exposure(start_step)],
+                            )
+                    residual = np.stack(
+                        [correction.residual_slopes(int(s), exposure) for s, exposure in zip(starts, slopes)]
+                    )
                     lgs_residual_rms[:, frame] = lucky_frame_rms_nm(estimator.rms_nm(residual))
-            buffer[:, j], axis_strehl[imaged, frame], rms = science.frame(frame, steps, layer_scales, correction,
-                                                                          apodisation=apodisation)
+            buffer[:, j], axis_strehl[imaged, frame], rms = science.frame(
+                frame, steps, layer_scales, correction, apodisation=apodisation
+            )
             if apodisation is not None:
                 transmitted[frame] = science.transmitted_flux
             true_rms_nm[:, frame] = phase_rad_to_nm(rms, REFERENCE_WAVELENGTH_M)
@@ -225,44 +268,95 @@ def simulate(case: Case, screens: ScreenSet, write_frames, sensor: LgsSensor | N
     frame_time = spf * case.time_step_s
     extra = {}
     if sensor is not None or lgs_rms_nm is not None:
-        extra["lgs_rms_nm"] = (("target", "frame"), lgs_rms, {
-            "units": "nm", "long_name": "tilt-removed rms of the LGS tomographic reconstruction along the "
-            "target, over the frame's WFS exposures"})
+        extra["lgs_rms_nm"] = (
+            ("target", "frame"),
+            lgs_rms,
+            {
+                "units": "nm",
+                "long_name": "tilt-removed rms of the LGS tomographic reconstruction along the "
+                "target, over the frame's WFS exposures",
+            },
+        )
     if correction is not None:
-        extra["lgs_residual_rms_nm"] = (("target", "frame"), lgs_residual_rms, {
-            "units": "nm", "long_name": "tilt-removed rms of the LGS pseudo-closed-loop reconstruction (open-loop "
-            "slopes less the DM's) along the target, over the frame's WFS exposures"})
+        extra["lgs_residual_rms_nm"] = (
+            ("target", "frame"),
+            lgs_residual_rms,
+            {
+                "units": "nm",
+                "long_name": "tilt-removed rms of the LGS pseudo-closed-loop reconstruction (open-loop "
+                "slopes less the DM's) along the target, over the frame's WFS exposures",
+            },
+        )
         if apodisation is not None:
-            extra["transmitted_flux"] = (("frame",), transmitted, {
-                "units": "1", "long_name": "flux through the adaptively apodised pupil over the full pupil's, "
-                f"mean over the frame's steps (blocked fraction of the pupil area: 1 minus it); driver "
-                f"{case.ao.apodisation.driver}"})
-        extra["dm_commands_m"] = (("exposure", "actuator"), dm_commands, {
-            "units": "m", "long_name": "DM commands of each WFS exposure (applied from delay_steps after its "
-            "start), valid actuators"})
+            extra["transmitted_flux"] = (
+                ("frame",),
+                transmitted,
+                {
+                    "units": "1",
+                    "long_name": "flux through the adaptively apodised pupil over the full pupil's, "
+                    f"mean over the frame's steps (blocked fraction of the pupil area: 1 minus it); driver "
+                    f"{case.ao.apodisation.driver}",
+                },
+            )
+        extra["dm_commands_m"] = (
+            ("exposure", "actuator"),
+            dm_commands,
+            {
+                "units": "m",
+                "long_name": "DM commands of each WFS exposure (applied from delay_steps after its "
+                "start), valid actuators",
+            },
+        )
     return xr.Dataset(
         {
             **extra,
-            "true_rms_nm": (("target", "frame"), true_rms_nm,
-                            {"units": "nm", "long_name": "tilt-removed rms of the residual (corrected) "
-                             "wavefront over the pupil and the frame's exposure"}),
+            "true_rms_nm": (
+                ("target", "frame"),
+                true_rms_nm,
+                {
+                    "units": "nm",
+                    "long_name": "tilt-removed rms of the residual (corrected) "
+                    "wavefront over the pupil and the frame's exposure",
+                },
+            ),
             "r0_500nm_m": (("frame",), r0_frame, {"units": "m", "long_name": "Fried parameter at 500 nm"}),
-            "axis_strehl": (("target", "frame"), axis_strehl,
-                            {"units": "1", "long_name": "frame value on the optical axis over the "
-                             "diffraction-limited peak (NaN: target not imaged by the simulation)"}),
+            "axis_strehl": (
+                ("target", "frame"),
+                axis_strehl,
+                {
+                    "units": "1",
+                    "long_name": "frame value on the optical axis over the "
+                    "diffraction-limited peak (NaN: target not imaged by the simulation)",
+                },
+            ),
         },
         coords={
-            "time_s": (("frame",), np.arange(n_frames) * frame_time,
-                       {"units": "s", "long_name": "start time of the frame"}),
-            "target_x_arcsec": (("target",), [t.theta_x_rad / ARCSEC_RAD for t in case.targets],
-                                {"units": "arcsec", "long_name": "target x direction"}),
-            "target_y_arcsec": (("target",), [t.theta_y_rad / ARCSEC_RAD for t in case.targets],
-                                {"units": "arcsec", "long_name": "target y direction"}),
-            "imaged": (("target",), np.isin(np.arange(n_targets), imaged).astype(np.int8),
-                       {"units": "1", "long_name": "target imaged (frames written) by the simulation"}),
+            "time_s": (
+                ("frame",),
+                np.arange(n_frames) * frame_time,
+                {"units": "s", "long_name": "start time of the frame"},
+            ),
+            "target_x_arcsec": (
+                ("target",),
+                [t.theta_x_rad / ARCSEC_RAD for t in case.targets],
+                {"units": "arcsec", "long_name": "target x direction"},
+            ),
+            "target_y_arcsec": (
+                ("target",),
+                [t.theta_y_rad / ARCSEC_RAD for t in case.targets],
+                {"units": "arcsec", "long_name": "target y direction"},
+            ),
+            "imaged": (
+                ("target",),
+                np.isin(np.arange(n_targets), imaged).astype(np.int8),
+                {"units": "1", "long_name": "target imaged (frames written) by the simulation"},
+            ),
         },
-        attrs={"diffraction_limited_peak": imager.diffraction_limited_peak,
-               "pupil_samples": imager.grid.n_pix, "pupil_sample_m": imager.grid.dx_m},
+        attrs={
+            "diffraction_limited_peak": imager.diffraction_limited_peak,
+            "pupil_samples": imager.grid.n_pix,
+            "pupil_sample_m": imager.grid.dx_m,
+        },
     )
 
 
@@ -279,9 +373,19 @@ class TimeLoop:
     takes seconds, which a benchmark leaves out of its timing); :meth:`run` runs it once.
     """
 
-    def __init__(self, case: Case, screens: ScreenSet, seed: int, *, reconstructors: np.ndarray | None = None,
-                 calibration=None, slopes=None, commands: tuple[np.ndarray, np.ndarray] | None = None,
-                 lgs_rms_nm: np.ndarray | None = None, imaged_targets=None):
+    def __init__(
+        self,
+        case: Case,
+        screens: ScreenSet,
+        seed: int,
+        *,
+        reconstructors: np.ndarray | None = None,
+        calibration=None,
+        slopes=None,
+        commands: tuple[np.ndarray, np.ndarray] | None = None,
+        lgs_rms_nm: np.ndarray | None = None,
+        imaged_targets=None,
+    ):
         self.case, self.screens, self.commands = case, screens, commands
         self.lgs_rms_nm, self.imaged_targets = lgs_rms_nm, imaged_targets
         self.sensor = self.estimator = None
@@ -292,8 +396,16 @@ class TimeLoop:
 
     def run(self, write_frames) -> xr.Dataset:
         """:func:`simulate` of the case (``write_frames`` as there): its telemetry."""
-        return simulate(self.case, self.screens, write_frames, self.sensor, self.estimator, self.commands,
-                        self.imaged_targets, lgs_rms_nm=self.lgs_rms_nm)
+        return simulate(
+            self.case,
+            self.screens,
+            write_frames,
+            self.sensor,
+            self.estimator,
+            self.commands,
+            self.imaged_targets,
+            lgs_rms_nm=self.lgs_rms_nm,
+        )
 
 
 class Replay:
@@ -304,8 +416,9 @@ class Replay:
     and stores nothing: the frames of a field case's off-axis targets are made where they are
     used (post-processing), not kept on disk."""
 
-    def __init__(self, case: Case, screens: ScreenSet, targets, dm_commands_m: np.ndarray | None,
-                 block_frames: int = 64):
+    def __init__(
+        self, case: Case, screens: ScreenSet, targets, dm_commands_m: np.ndarray | None, block_frames: int = 64
+    ):
         """``targets``: indices into ``case.targets``; ``dm_commands_m`` (exposure, actuator) of
         :func:`simulate`, None without AO."""
         self.case, self.screens, self.targets = case, screens, list(targets)
@@ -315,8 +428,10 @@ class Replay:
     def __call__(self):
         case = self.case
         if case.ao.apodisation is not None:
-            raise ValueError("replaying an adaptively apodised case (ao.apodisation) is not supported: image all "
-                             "its targets in the simulation")
+            raise ValueError(
+                "replaying an adaptively apodised case (ao.apodisation) is not supported: image all "
+                "its targets in the simulation"
+            )
         clock = case.clock
         science = SciencePath(case, self.screens, self.targets, range(len(self.targets)))
         dm = None
@@ -331,5 +446,6 @@ class Replay:
                     for step in clock.exposure_starts(steps):
                         dm.apply(int(step), self.dm_commands_m[clock.exposure(step)])
                 block[:, j], self.axis_strehl[:, start + j], _ = science.frame(
-                    start + j, steps, case.layer_scales(steps), dm, truth=False)
+                    start + j, steps, case.layer_scales(steps), dm, truth=False
+                )
             yield start, block[:, :count].copy()

@@ -13,6 +13,7 @@ import numpy as np
 from ..ao.apodisation import ApodisationSettings
 from ..ao.dm import DeformableMirror
 from ..atmosphere.statistics import Layer, R0Schedule
+from ..clock import FrameClock, frame_count, steps_per_frame
 from ..geometry import LineOfSight
 from ..optics.imaging import Camera
 from ..optics.pupil import Telescope
@@ -21,7 +22,6 @@ from ..units import ARCSEC_RAD
 from ..wfs.beacons import LgsConfig
 from ..wfs.calibration import BeaconSeeing
 from ..wfs.shack_hartmann import ShackHartmann
-from ..clock import FrameClock, frame_count, steps_per_frame
 from .schema import case_defaults
 
 
@@ -46,8 +46,15 @@ class WfsSettings:
 
     def shack_hartmann(self, telescope: Telescope, lgs: LgsConfig) -> ShackHartmann:
         """The sensor of these settings at the beacons' wavelength."""
-        return ShackHartmann(telescope, self.n_subapertures, lgs.wavelength_m, self.n_pixels,
-                             self.pixel_scale_arcsec, self.min_illumination, lgs.launch_diameter_m)
+        return ShackHartmann(
+            telescope,
+            self.n_subapertures,
+            lgs.wavelength_m,
+            self.n_pixels,
+            self.pixel_scale_arcsec,
+            self.min_illumination,
+            lgs.launch_diameter_m,
+        )
 
 
 @dataclass(frozen=True)
@@ -91,8 +98,13 @@ class AoSettings:
 
 def ao_from(block: dict) -> AoSettings:
     apodisation = block.get("apodisation")
-    return AoSettings(**{**block, "correction_direction_arcsec": tuple(block["correction_direction_arcsec"]),
-                         "apodisation": None if apodisation is None else ApodisationSettings(**apodisation)})
+    return AoSettings(
+        **{
+            **block,
+            "correction_direction_arcsec": tuple(block["correction_direction_arcsec"]),
+            "apodisation": None if apodisation is None else ApodisationSettings(**apodisation),
+        }
+    )
 
 
 def telescope_from(block: dict) -> Telescope:
@@ -111,13 +123,22 @@ def wfs_from(block: dict) -> WfsSettings:
 
 def seeing_from(atmosphere: dict, lgs: LgsConfig) -> BeaconSeeing:
     """The turbulence the beacons see, for the mean r0 of an ``atmosphere`` block."""
-    return BeaconSeeing(atmosphere["r0_500nm_m"], atmosphere["outer_scale_m"], tuple(atmosphere["height_m"]),
-                        tuple(atmosphere["cn2_fraction"]), lgs.height_m)
+    return BeaconSeeing(
+        atmosphere["r0_500nm_m"],
+        atmosphere["outer_scale_m"],
+        tuple(atmosphere["height_m"]),
+        tuple(atmosphere["cn2_fraction"]),
+        lgs.height_m,
+    )
 
 
 def tomography_from(block: dict) -> TomographySettings:
-    prior = TurbulencePrior(block["prior_r0_500nm_m"], block["prior_outer_scale_m"],
-                            tuple(block["layer_heights_m"]), tuple(block["layer_cn2_fraction"]))
+    prior = TurbulencePrior(
+        block["prior_r0_500nm_m"],
+        block["prior_outer_scale_m"],
+        tuple(block["layer_heights_m"]),
+        tuple(block["layer_cn2_fraction"]),
+    )
     return TomographySettings(prior, block["noise_rms_arcsec"], block["points_per_subaperture"])
 
 
@@ -150,8 +171,10 @@ class Case:
     @classmethod
     def from_config(cls, case: dict) -> "Case":
         atm, cam = case["atmosphere"], case["camera"]
-        layers = tuple(Layer(*v) for v in zip(atm["height_m"], atm["cn2_fraction"],
-                                              atm["wind_speed_m_s"], atm["wind_direction_deg"]))
+        layers = tuple(
+            Layer(*v)
+            for v in zip(atm["height_m"], atm["cn2_fraction"], atm["wind_speed_m_s"], atm["wind_direction_deg"])
+        )
         return cls(
             telescope=telescope_from(case["telescope"]),
             camera=Camera(cam["wavelength_m"], cam["n_pixels"], cam["field_of_view_arcsec"] / cam["n_pixels"]),

@@ -47,8 +47,11 @@ def sweep_detector_list(lucky: dict) -> list[tuple[str, dict]]:
         return []
     grid = sweep["photons_per_frame"]
     photons = np.geomspace(grid["min"], grid["max"], grid["levels"])
-    return [(sweep_name(read_noise, n), {"photons_per_frame": float(n), "read_noise_e": float(read_noise)})
-            for read_noise in sweep["read_noise_e"] for n in photons]
+    return [
+        (sweep_name(read_noise, n), {"photons_per_frame": float(n), "read_noise_e": float(read_noise)})
+        for read_noise in sweep["read_noise_e"]
+        for n in photons
+    ]
 
 
 def sweep_detectors(lucky: dict) -> dict:

@@ -6,12 +6,12 @@ The dict comes from ``studyspec.lucky.lucky_settings`` (validated; defaults in `
 
 from dataclasses import dataclass
 
+from ..io.hashing import canonical_json
 from ..lucky.detector import Detector
 from ..lucky.registration import Registration, search_px
 from ..lucky.scoring import MatchedStrehl
 from ..optics.imaging import Imager
 from .case import Case
-from ..io.hashing import canonical_json
 from .lucky import error_blocks, frame_strehl, image_crop_px, registrations
 from .resolved import imaged_targets
 
@@ -19,7 +19,8 @@ from .resolved import imaged_targets
 @dataclass(frozen=True)
 class LuckySettings:
     """One case's lucky imaging: its detectors, fractions kept, time blocks of the errors, the
-    detector-noise seed, the images' crop, the registration methods, and the case (its config for provenance, its physics, the targets the
+    detector-noise seed, the images' crop, the registration methods, and the case (its config for provenance, its
+    physics, the targets the
     simulation imaged and the reference target, if any)."""
 
     case_name: str
@@ -45,15 +46,29 @@ class LuckySettings:
         """From a ``studyspec.lucky.lucky_settings`` dict."""
         case = settings["case_config"]
         return cls(
-            case_name=settings["case"], case_config=case, case=Case.from_config(case), seed=settings["seed"],
+            case_name=settings["case"],
+            case_config=case,
+            case=Case.from_config(case),
+            seed=settings["seed"],
             fractions=tuple(settings["fractions"]),
-            detectors=tuple(Detector(name, d["photons_per_frame"], d["read_noise_e"],
-                                     d.get("electron_multiplying", False), d.get("photon_counting_threshold_e"))
-                            for name, d in settings["detectors"].items()),
-            error_blocks=error_blocks(settings), imaged_targets=tuple(imaged_targets(case)),
-            reference_target=case.get("reference_target"), image_crop_px=image_crop_px(settings),
-            registrations=tuple(registrations(settings)), frame_strehl=frame_strehl(settings),
-            settings_json=canonical_json({k: v for k, v in settings.items() if k != "case_config"}))
+            detectors=tuple(
+                Detector(
+                    name,
+                    d["photons_per_frame"],
+                    d["read_noise_e"],
+                    d.get("electron_multiplying", False),
+                    d.get("photon_counting_threshold_e"),
+                )
+                for name, d in settings["detectors"].items()
+            ),
+            error_blocks=error_blocks(settings),
+            imaged_targets=tuple(imaged_targets(case)),
+            reference_target=case.get("reference_target"),
+            image_crop_px=image_crop_px(settings),
+            registrations=tuple(registrations(settings)),
+            frame_strehl=frame_strehl(settings),
+            settings_json=canonical_json({k: v for k, v in settings.items() if k != "case_config"}),
+        )
 
     def registration_methods(self) -> list[Registration]:
         """The registration methods, built for the case's camera: the diffraction-limited image
@@ -61,8 +76,9 @@ class LuckySettings:
         search box (:func:`luckyao.lucky.registration.search_px`)."""
         camera = self.case.camera
         box = search_px(camera.n_pixels, camera.pixel_scale_arcsec)
-        return [Registration(name, self._diffraction_limited(), self._core_fwhm_px(), box)
-                for name in self.registrations]
+        return [
+            Registration(name, self._diffraction_limited(), self._core_fwhm_px(), box) for name in self.registrations
+        ]
 
     def matched_strehl(self) -> MatchedStrehl | None:
         """The frames' matched-filter Strehl (``frame_strehl: matched_filter``), else None."""

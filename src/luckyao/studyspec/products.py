@@ -6,6 +6,7 @@ from ..io.hashing import sha256
 from .scaling import screen_min_across_m
 from .schema import case_defaults
 
+
 def turbulence_spec(study: dict, case: dict) -> dict:
     """Everything the shared screens depend on (not r0 or Cn2: those only scale them); the
     strips' width across the wind for this case's telescope (``scaling.screen_min_across_m``)."""
@@ -60,9 +61,13 @@ def calibration_spec(study: dict, case: dict) -> dict | None:
     if not case["lgs"]["enabled"] or {**case_defaults("wfs"), **wfs}["calibration"] == "none":
         return None
     atm = case["atmosphere"]
-    return {"seed": study["seed"], "telescope": case["telescope"], "lgs": case["lgs"],
-            "wfs": {k: v for k, v in wfs.items() if k not in ("photons_per_subaperture", "read_noise_e", "exposure_steps")},
-            "atmosphere": {k: atm[k] for k in ("r0_500nm_m", "outer_scale_m", "height_m", "cn2_fraction")}}
+    return {
+        "seed": study["seed"],
+        "telescope": case["telescope"],
+        "lgs": case["lgs"],
+        "wfs": {k: v for k, v in wfs.items() if k not in ("photons_per_subaperture", "read_noise_e", "exposure_steps")},
+        "atmosphere": {k: atm[k] for k in ("r0_500nm_m", "outer_scale_m", "height_m", "cn2_fraction")},
+    }
 
 
 def calibration_key(spec: dict) -> str:
@@ -91,8 +96,11 @@ def slopes_spec(study: dict, case: dict) -> dict | None:
     seed and the screens; cases that differ only in their AO or targets share them."""
     if case["ao"]["mode"] == "none":
         return None
-    return {"seed": study["seed"], "screens": turbulence_key(turbulence_spec(study, case)),
-            "case": lgs_chain_config(case)}
+    return {
+        "seed": study["seed"],
+        "screens": turbulence_key(turbulence_spec(study, case)),
+        "case": lgs_chain_config(case),
+    }
 
 
 def slopes_key(spec: dict) -> str:
@@ -108,5 +116,13 @@ def lgs_twin(study: dict, cases: dict, name: str) -> str | None:
     if case["ao"]["mode"] != "none" or (spec := lgs_spec(case)) is None:
         return None
     screens = turbulence_spec(study, case)
-    return next((other for other in sorted(cases) if cases[other]["ao"]["mode"] != "none"
-                 and lgs_spec(cases[other]) == spec and turbulence_spec(study, cases[other]) == screens), None)
+    return next(
+        (
+            other
+            for other in sorted(cases)
+            if cases[other]["ao"]["mode"] != "none"
+            and lgs_spec(cases[other]) == spec
+            and turbulence_spec(study, cases[other]) == screens
+        ),
+        None,
+    )

@@ -63,8 +63,9 @@ def subapertures_across(diameter_m: float, pitch_m: float) -> int:
     return int(round(diameter_m / pitch_m))
 
 
-def camera_pixels(diameter_m: float, wavelength_m: float, field_of_view_arcsec: float,
-                  pixels_per_lambda_over_d: float) -> int:
+def camera_pixels(
+    diameter_m: float, wavelength_m: float, field_of_view_arcsec: float, pixels_per_lambda_over_d: float
+) -> int:
     """Pixels across the lucky camera's field: the smallest multiple of :data:`PIXEL_MULTIPLE`
     whose prime factors are :data:`FAST_FFT_PRIMES` with at least ``pixels_per_lambda_over_d``
     pixels per lambda/D and two per pupil sample (pupil sampling ``lambda / field``, the grid of
@@ -91,23 +92,30 @@ def derive_size_defaults(case: dict, where: str) -> dict:
     derived from ``telescope.diameter_m``; ``where`` names the case in errors (``cases.x``)."""
     for derived, parameter in DERIVED_KEYS.items():
         if _get(case, derived) is not None and _get(case, parameter) is not None:
-            raise ConfigError(f"config key '{where}.{derived}': given with {parameter}, from which it is derived; "
-                              "give one of them")
+            raise ConfigError(
+                f"config key '{where}.{derived}': given with {parameter}, from which it is derived; give one of them"
+            )
     out = copy.deepcopy(case)
     telescope, camera = out["telescope"], out["camera"]
     diameter_m = telescope["diameter_m"]
     pitch_m = _parameter(case, "telescope.subaperture_pitch_m")
     n_sub = subapertures_across(diameter_m, pitch_m)
     if n_sub < 2 and ("n_subapertures" not in out["wfs"] or "n_actuators" not in out["ao"]):
-        raise ConfigError(f"config key '{where}.telescope.diameter_m': {diameter_m:g} m holds {n_sub} sub-apertures "
-                          f"of telescope.subaperture_pitch_m = {pitch_m:g} m; at least 2 are needed")
+        raise ConfigError(
+            f"config key '{where}.telescope.diameter_m': {diameter_m:g} m holds {n_sub} sub-apertures "
+            f"of telescope.subaperture_pitch_m = {pitch_m:g} m; at least 2 are needed"
+        )
     out["wfs"].setdefault("n_subapertures", n_sub)
     out["ao"].setdefault("n_actuators", n_sub + 1)
     if "obscuration_m" not in telescope:
         telescope["obscuration_m"] = round(_parameter(case, "telescope.obscuration_ratio") * diameter_m, 3)
     if "n_pixels" not in camera:
-        camera["n_pixels"] = camera_pixels(diameter_m, camera["wavelength_m"], camera["field_of_view_arcsec"],
-                                           _parameter(case, "camera.pixels_per_lambda_over_d"))
+        camera["n_pixels"] = camera_pixels(
+            diameter_m,
+            camera["wavelength_m"],
+            camera["field_of_view_arcsec"],
+            _parameter(case, "camera.pixels_per_lambda_over_d"),
+        )
     return out
 
 

@@ -70,11 +70,15 @@ def name_problem(name) -> str | None:
     if not isinstance(name, str):
         return f"{name!r} is not a name (a string)"
     if len(name) > spec["maxLength"]:
-        return (f"'{name[:24]}...' is {len(name)} characters long, more than the {spec['maxLength']} a name may "
-                "have: names become file names (255 bytes at most, with the workflow's suffixes)")
+        return (
+            f"'{name[:24]}...' is {len(name)} characters long, more than the {spec['maxLength']} a name may "
+            "have: names become file names (255 bytes at most, with the workflow's suffixes)"
+        )
     if not re.search(spec["pattern"], name):
-        return (f"{name!r} is not a safe name (a letter or digit, then letters, digits, _ . + -; "
-                "never '..'): names become file names and command-line words")
+        return (
+            f"{name!r} is not a safe name (a letter or digit, then letters, digits, _ . + -; "
+            "never '..'): names become file names and command-line words"
+        )
     return None
 
 

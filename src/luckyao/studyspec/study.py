@@ -20,11 +20,11 @@ def _check_case(name: str, case: dict, turbulence: dict) -> None:
     n = len(atm["height_m"])
     for key in ("cn2_fraction", "wind_speed_m_s", "wind_direction_deg"):
         if len(atm[key]) != n:
-            raise ConfigError(f"config key '{where}.atmosphere.{key}': has {len(atm[key])} values, "
-                              f"height_m has {n}")
+            raise ConfigError(f"config key '{where}.atmosphere.{key}': has {len(atm[key])} values, height_m has {n}")
     if abs(sum(atm["cn2_fraction"]) - 1) > 1e-3:
-        raise ConfigError(f"config key '{where}.atmosphere.cn2_fraction': sums to "
-                          f"{sum(atm['cn2_fraction']):.4f}, must sum to 1")
+        raise ConfigError(
+            f"config key '{where}.atmosphere.cn2_fraction': sums to {sum(atm['cn2_fraction']):.4f}, must sum to 1"
+        )
     if atm["r0_amplitude_m"] >= atm["r0_500nm_m"]:
         raise ConfigError(f"config key '{where}.atmosphere.r0_amplitude_m': must be below r0_500nm_m")
     steps = case["camera"]["frame_time_s"] / case["time_step_s"]
@@ -33,35 +33,48 @@ def _check_case(name: str, case: dict, turbulence: dict) -> None:
     if case["duration_s"] < case["camera"]["frame_time_s"]:
         raise ConfigError(f"config key '{where}.duration_s': shorter than one camera frame")
     if case["duration_s"] > turbulence["duration_s"] + 1e-9:
-        raise ConfigError(f"config key '{where}.duration_s': {case['duration_s']} s exceeds "
-                          f"turbulence.duration_s = {turbulence['duration_s']} s")
+        raise ConfigError(
+            f"config key '{where}.duration_s': {case['duration_s']} s exceeds "
+            f"turbulence.duration_s = {turbulence['duration_s']} s"
+        )
     tomo = case["tomography"]
     if len(tomo["layer_cn2_fraction"]) != len(tomo["layer_heights_m"]):
-        raise ConfigError(f"config key '{where}.tomography.layer_cn2_fraction': has "
-                          f"{len(tomo['layer_cn2_fraction'])} values, layer_heights_m has {len(tomo['layer_heights_m'])}")
+        raise ConfigError(
+            f"config key '{where}.tomography.layer_cn2_fraction': has "
+            f"{len(tomo['layer_cn2_fraction'])} values, layer_heights_m has {len(tomo['layer_heights_m'])}"
+        )
     if case["lgs"]["enabled"] and steps % case["wfs"]["exposure_steps"]:
-        raise ConfigError(f"config key '{where}.wfs.exposure_steps': must divide the {round(steps)} steps "
-                          "of a camera frame")
+        raise ConfigError(
+            f"config key '{where}.wfs.exposure_steps': must divide the {round(steps)} steps of a camera frame"
+        )
     if case["ao"]["mode"] != "none":
         if not case["lgs"]["enabled"]:
             raise ConfigError(f"config key '{where}.ao.mode': {case['ao']['mode']} needs lgs.enabled: true")
         if case["ao"]["delay_steps"] < case["wfs"]["exposure_steps"]:
-            raise ConfigError(f"config key '{where}.ao.delay_steps': a command cannot be applied before its "
-                              f"exposure ends (at least wfs.exposure_steps = {case['wfs']['exposure_steps']})")
+            raise ConfigError(
+                f"config key '{where}.ao.delay_steps': a command cannot be applied before its "
+                f"exposure ends (at least wfs.exposure_steps = {case['wfs']['exposure_steps']})"
+            )
     if "apodisation" in case["ao"] and case["ao"]["mode"] == "none":
-        raise ConfigError(f"config key '{where}.ao.apodisation': needs ao.mode ltao or glao (it is applied with "
-                          "each exposure's DM command)")
+        raise ConfigError(
+            f"config key '{where}.ao.apodisation': needs ao.mode ltao or glao (it is applied with "
+            "each exposure's DM command)"
+        )
     if case["telescope"]["obscuration_m"] >= case["telescope"]["diameter_m"]:
         raise ConfigError(f"config key '{where}.telescope.obscuration_m': must be below diameter_m")
     reference = case.get("reference_target")
     if reference is not None and reference >= len(case["targets_arcsec"]):
-        raise ConfigError(f"config key '{where}.reference_target': {reference} is not the index of one of the "
-                          f"{len(case['targets_arcsec'])} targets_arcsec")
+        raise ConfigError(
+            f"config key '{where}.reference_target': {reference} is not the index of one of the "
+            f"{len(case['targets_arcsec'])} targets_arcsec"
+        )
     radius = turbulence["field_radius_arcsec"]
     for x, y in case["targets_arcsec"]:
         if (x * x + y * y) ** 0.5 > radius:
-            raise ConfigError(f"config key '{where}.targets_arcsec': target ({x}, {y}) lies beyond "
-                              f"turbulence.field_radius_arcsec = {radius}")
+            raise ConfigError(
+                f"config key '{where}.targets_arcsec': target ({x}, {y}) lies beyond "
+                f"turbulence.field_radius_arcsec = {radius}"
+            )
 
 
 def validate_study(config: dict, schema: dict | None = None) -> dict:
@@ -90,8 +103,10 @@ def validate_study(config: dict, schema: dict | None = None) -> dict:
             n_frames = frame_count(resolved)
             blocks = error_blocks(config["lucky"])
             if n_frames < 2 * blocks:
-                raise ConfigError(f"config key 'lucky.error_blocks': {blocks} blocks need at least {2 * blocks} "
-                                  f"frames, case '{name}' has {n_frames}")
+                raise ConfigError(
+                    f"config key 'lucky.error_blocks': {blocks} blocks need at least {2 * blocks} "
+                    f"frames, case '{name}' has {n_frames}"
+                )
         except ConfigError as err:
             problems.append(str(err))
             continue
@@ -115,23 +130,29 @@ def _check_detectors(lucky: dict) -> None:
         return
     count = len(sweep["read_noise_e"]) * sweep["photons_per_frame"]["levels"]
     if count > MAX_SWEEP_DETECTORS:
-        raise ConfigError(f"config key 'lucky.detector_sweep': {len(sweep['read_noise_e'])} read noises x "
-                          f"{sweep['photons_per_frame']['levels']} levels make {count:,} detectors, more than the "
-                          f"{MAX_SWEEP_DETECTORS:,} a study may hold (each one's partial sums held in every lucky job "
-                          "it applies to)")
+        raise ConfigError(
+            f"config key 'lucky.detector_sweep': {len(sweep['read_noise_e'])} read noises x "
+            f"{sweep['photons_per_frame']['levels']} levels make {count:,} detectors, more than the "
+            f"{MAX_SWEEP_DETECTORS:,} a study may hold (each one's partial sums held in every lucky job "
+            "it applies to)"
+        )
     seen = {}
     for name, spec in sweep_detector_list(lucky):
         if name in seen:
             key = "photons_per_frame" if seen[name]["read_noise_e"] == spec["read_noise_e"] else "read_noise_e"
             unit = "photons" if key == "photons_per_frame" else "e-"
-            raise ConfigError(f"config key 'lucky.detector_sweep.{key}': two of its detectors would share the name "
-                              f"'{name}' ({seen[name][key]:.9g} and {spec[key]:.9g} {unit}; names keep 3 significant "
-                              "digits of the photons and 6 of the read noise): make its values differ more")
+            raise ConfigError(
+                f"config key 'lucky.detector_sweep.{key}': two of its detectors would share the name "
+                f"'{name}' ({seen[name][key]:.9g} and {spec[key]:.9g} {unit}; names keep 3 significant "
+                "digits of the photons and 6 of the read noise): make its values differ more"
+            )
         seen[name] = spec
         if name in lucky["detectors"]:
-            raise ConfigError(f"config key 'lucky.detectors.{name}': the detector sweep names one of its detectors "
-                              f"'{name}' too ({spec['read_noise_e']:g} e-, {spec['photons_per_frame']:g} photons per "
-                              "frame); a case given the sweep would get that one under this name: rename it")
+            raise ConfigError(
+                f"config key 'lucky.detectors.{name}': the detector sweep names one of its detectors "
+                f"'{name}' too ({spec['read_noise_e']:g} e-, {spec['photons_per_frame']:g} photons per "
+                "frame); a case given the sweep would get that one under this name: rename it"
+            )
 
 
 def _check_label(label, where: str) -> None:
@@ -148,23 +169,31 @@ def _check_label(label, where: str) -> None:
         MathTextParser("path").parse(label, 72)
     except ValueError as err:
         reason = [line.strip() for line in str(err).splitlines() if line.strip()][-1]
-        raise ConfigError(f"config key '{where}': matplotlib cannot draw {label!r} ({reason}); write the text "
-                          r"between $ as matplotlib math text, or a literal $ as \$") from None
+        raise ConfigError(
+            f"config key '{where}': matplotlib cannot draw {label!r} ({reason}); write the text "
+            r"between $ as matplotlib math text, or a literal $ as \$"
+        ) from None
 
 
 def _check_figure(fig_id: str, figure: dict, cases: dict, config: dict) -> None:
     for case in figure["cases"]:
         if case not in config["cases"]:
             raise ConfigError(f"config key 'figures.{fig_id}.cases': unknown case '{case}'")
-    needs = {"quality_vs_fraction": ("criteria",), "quality_vs_distance": ("criteria", "fractions"),
-             "quality_vs_parameter": ("sweep", "criteria", "fractions"), "psf_gallery": ("criteria", "fractions"),
-             "quality_vs_diameter": ("criteria", "fractions")}
+    needs = {
+        "quality_vs_fraction": ("criteria",),
+        "quality_vs_distance": ("criteria", "fractions"),
+        "quality_vs_parameter": ("sweep", "criteria", "fractions"),
+        "psf_gallery": ("criteria", "fractions"),
+        "quality_vs_diameter": ("criteria", "fractions"),
+    }
     for key in needs.get(figure["kind"], ()):
         if key not in figure:
             raise ConfigError(f"config key 'figures.{fig_id}.{key}': required for {figure['kind']}")
     if "parameter" in figure and figure["parameter"] not in config["sweeps"][figure["sweep"]]["parameters"]:
-        raise ConfigError(f"config key 'figures.{fig_id}.parameter': '{figure['parameter']}' is not a parameter "
-                          f"of sweep '{figure['sweep']}'")
+        raise ConfigError(
+            f"config key 'figures.{fig_id}.parameter': '{figure['parameter']}' is not a parameter "
+            f"of sweep '{figure['sweep']}'"
+        )
     if figure["kind"] == "comparisons":
         if "pairs" not in figure:
             raise ConfigError(f"config key 'figures.{fig_id}.pairs': required for comparisons")
@@ -172,21 +201,28 @@ def _check_figure(fig_id: str, figure: dict, cases: dict, config: dict) -> None:
         for i, pair in enumerate(figure["pairs"]):
             _check_label(pair["label"], f"figures.{fig_id}.pairs[{i}].label")
             if labels.index(pair["label"]) != i:
-                raise ConfigError(f"config key 'figures.{fig_id}.pairs[{i}].label': {pair['label']!r} is also the "
-                                  f"label of pairs[{labels.index(pair['label'])}] (a label names one difference)")
+                raise ConfigError(
+                    f"config key 'figures.{fig_id}.pairs[{i}].label': {pair['label']!r} is also the "
+                    f"label of pairs[{labels.index(pair['label'])}] (a label names one difference)"
+                )
             for side in ("a", "b"):
                 case, criterion = pair[side]["case"], pair[side]["criterion"]
                 if case not in figure["cases"]:
-                    raise ConfigError(f"config key 'figures.{fig_id}.pairs[{i}].{side}.case': '{case}' is not "
-                                      f"in the figure's cases")
+                    raise ConfigError(
+                        f"config key 'figures.{fig_id}.pairs[{i}].{side}.case': '{case}' is not in the figure's cases"
+                    )
                 if case in cases and criterion not in criteria_of(cases[case]):
-                    raise ConfigError(f"config key 'figures.{fig_id}.pairs[{i}].{side}.criterion': case '{case}' "
-                                      f"cannot give {criterion}")
+                    raise ConfigError(
+                        f"config key 'figures.{fig_id}.pairs[{i}].{side}.criterion': case '{case}' "
+                        f"cannot give {criterion}"
+                    )
     if figure["kind"] == "quality_vs_distance":
         for case in figure["cases"]:
             if case in cases and len(cases[case]["targets_arcsec"]) < 2:
-                raise ConfigError(f"config key 'figures.{fig_id}.cases': case '{case}' has one target; "
-                                  "quality_vs_distance needs a field of targets")
+                raise ConfigError(
+                    f"config key 'figures.{fig_id}.cases': case '{case}' has one target; "
+                    "quality_vs_distance needs a field of targets"
+                )
     for case in figure["cases"]:
         if case not in cases:  # invalid itself: reported with the cases
             continue
@@ -195,9 +231,11 @@ def _check_figure(fig_id: str, figure: dict, cases: dict, config: dict) -> None:
         needed |= {"lgs_rms"} if figure["kind"] == "rms_truth" else set()
         needed |= {"lgs_residual_rms"} if figure["kind"] == "residuals" else set()
         if needed - produced:
-            raise ConfigError(f"config key 'figures.{fig_id}.cases': case '{case}' cannot give "
-                              f"{', '.join(sorted(needed - produced))} (needs "
-                              f"{'LGS' if 'lgs_rms' in needed - produced else 'AO'})")
+            raise ConfigError(
+                f"config key 'figures.{fig_id}.cases': case '{case}' cannot give "
+                f"{', '.join(sorted(needed - produced))} (needs "
+                f"{'LGS' if 'lgs_rms' in needed - produced else 'AO'})"
+            )
     detector = figure.get("detector")
     if detector is not None and detector not in config["lucky"]["detectors"]:
         raise ConfigError(f"config key 'figures.{fig_id}.detector': unknown detector '{detector}'")
@@ -211,8 +249,10 @@ def _check_figure(fig_id: str, figure: dict, cases: dict, config: dict) -> None:
                 raise ConfigError(f"config key 'figures.{fig_id}.{key}': required for {kind}")
         missing = set(figure["read_noise_e"]) - set(sweep["read_noise_e"])
         if missing:
-            raise ConfigError(f"config key 'figures.{fig_id}.read_noise_e': {sorted(missing)} not in "
-                              "lucky.detector_sweep.read_noise_e")
+            raise ConfigError(
+                f"config key 'figures.{fig_id}.read_noise_e': {sorted(missing)} not in "
+                "lucky.detector_sweep.read_noise_e"
+            )
     missing = set(figure.get("fractions", [])) - set(config["lucky"]["fractions"])
     if missing:
         raise ConfigError(f"config key 'figures.{fig_id}.fractions': {sorted(missing)} not in lucky.fractions")
@@ -242,8 +282,10 @@ def plausibility_warnings(cases: dict) -> list[str]:
             for part in path.split("."):
                 value = value[part]
             if not low <= value <= high:
-                lines.append(f"config key 'cases.{name}.{path}': {value:g} {unit} is outside {low:g}-{high:g} "
-                             f"{unit}, implausible for {what}; is the unit right?")
+                lines.append(
+                    f"config key 'cases.{name}.{path}': {value:g} {unit} is outside {low:g}-{high:g} "
+                    f"{unit}, implausible for {what}; is the unit right?"
+                )
         fastest = max(case["atmosphere"]["wind_speed_m_s"])
         if fastest > 100:
             lines.append(f"config key 'cases.{name}.atmosphere.wind_speed_m_s': {fastest:g} m/s is above 100 m/s")
@@ -260,8 +302,9 @@ def drawn_cases(config: dict) -> list[str]:
     """Cases whose results a figure reads (sweeps expanded), sorted: ``all`` runs them and
     exports their images; a finished study has every one's ``lucky.nc`` and ``telemetry.nc``
     (the asterism figure is geometry only: its cases are not run for it)."""
-    return sorted({case for figure in config["figures"].values() if figure["kind"] != "asterism"
-                   for case in figure["cases"]})
+    return sorted(
+        {case for figure in config["figures"].values() if figure["kind"] != "asterism" for case in figure["cases"]}
+    )
 
 
 def read_study(*paths) -> dict:

@@ -94,14 +94,18 @@ def sweep_points(config: dict, sweep: str) -> list[SweepPoint]:
             override = deep_merge(override, _nested(path, value))
         name = "_".join([sweep] + [f"{labels[p]}-{_value_text(v)}" for p, v in zip(paths, values)])
         if (problem := name_problem(name)) is not None:
-            raise ConfigError(f"config key 'sweeps.{sweep}.parameters': the grid point {_point_text(paths, values)} "
-                              f"would be a case named by its values, but {problem}")
+            raise ConfigError(
+                f"config key 'sweeps.{sweep}.parameters': the grid point {_point_text(paths, values)} "
+                f"would be a case named by its values, but {problem}"
+            )
         if name in named:
             path = next((p for p, a, b in zip(paths, named[name], values) if repr(a) != repr(b)), paths[0])
-            raise ConfigError(f"config key 'sweeps.{sweep}.parameters.{path}': the values "
-                              f"{named[name][paths.index(path)]!r} and {values[paths.index(path)]!r} would share the "
-                              f"case name '{name}' (names keep 6 significant digits); make them differ there or "
-                              "sweep one of them")
+            raise ConfigError(
+                f"config key 'sweeps.{sweep}.parameters.{path}': the values "
+                f"{named[name][paths.index(path)]!r} and {values[paths.index(path)]!r} would share the "
+                f"case name '{name}' (names keep 6 significant digits); make them differ there or "
+                "sweep one of them"
+            )
         named[name] = values
         name = existing.get(repr(deep_merge(config["base"], override)), name)
         points.append(SweepPoint(name, dict(zip(paths, values))))
@@ -145,15 +149,16 @@ def expand_sweeps(config: dict) -> dict:
         largest = max(sizes, key=sizes.get)
         shape = " x ".join(str(len(v)) for v in sweeps[largest]["parameters"].values())
         others = f"; {sum(sizes.values()):,} with the other sweeps" if len(sizes) > 1 else ""
-        raise ConfigError(f"config key 'sweeps.{largest}.parameters': a grid of {sizes[largest]:,} points ({shape} "
-                          f"values{others}), more than the {MAX_GRID_POINTS:,} a study may hold: each point is a "
-                          "case, with its own simulation and post-processing jobs")
+        raise ConfigError(
+            f"config key 'sweeps.{largest}.parameters': a grid of {sizes[largest]:,} points ({shape} "
+            f"values{others}), more than the {MAX_GRID_POINTS:,} a study may hold: each point is a "
+            "case, with its own simulation and post-processing jobs"
+        )
     expanded = copy.deepcopy(config)
     for sweep in sweeps:
         for name, override in sweep_overrides(config, sweep).items():
             if name in expanded["cases"] and expanded["cases"][name] != override:
-                raise ConfigError(f"config key 'sweeps.{sweep}': its case '{name}' is also a different case "
-                                  "in cases")
+                raise ConfigError(f"config key 'sweeps.{sweep}': its case '{name}' is also a different case in cases")
             expanded["cases"][name] = override
     for fig_id, figure in (expanded.get("figures") or {}).items():
         if isinstance(figure, dict) and "sweep" in figure:

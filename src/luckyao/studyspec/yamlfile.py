@@ -40,8 +40,10 @@ class _StrictLoader(_Loader):
                 except TypeError:  # an unhashable key: the safe loader's own error follows
                     continue
                 if first is not None:
-                    raise ConfigError(f"config file '{self.name}': key {key!r} is written twice in one mapping "
-                                      f"(lines {first} and {line}); YAML would keep the last silently")
+                    raise ConfigError(
+                        f"config file '{self.name}': key {key!r} is written twice in one mapping "
+                        f"(lines {first} and {line}); YAML would keep the last silently"
+                    )
                 seen[key] = line
         return super().construct_mapping(node, deep)
 
@@ -57,21 +59,30 @@ def _expanded_size(root: yaml.Node, where: str) -> int:
             stack.pop()
             continue
         if key not in children:
-            kids = ([n for pair in node.value for n in pair] if isinstance(node, yaml.MappingNode)
-                    else list(node.value) if isinstance(node, yaml.SequenceNode) else [])
+            kids = (
+                [n for pair in node.value for n in pair]
+                if isinstance(node, yaml.MappingNode)
+                else list(node.value)
+                if isinstance(node, yaml.SequenceNode)
+                else []
+            )
             children[key] = kids
             pending = [kid for kid in kids if id(kid) not in sizes]
             for kid in pending:
                 if id(kid) in children:  # on the path being walked: an alias inside its own anchor
-                    raise ConfigError(f"config file '{where}': a YAML alias refers to a value that holds it "
-                                      f"(line {kid.start_mark.line + 1}); a config is a tree")
+                    raise ConfigError(
+                        f"config file '{where}': a YAML alias refers to a value that holds it "
+                        f"(line {kid.start_mark.line + 1}); a config is a tree"
+                    )
             if pending:
                 stack.extend(pending)
                 continue
         sizes[key] = 1 + sum(sizes[id(kid)] for kid in children.pop(key))
         if sizes[key] > MAX_VALUES:
-            raise ConfigError(f"config file '{where}': holds more than {MAX_VALUES:,} values once its YAML aliases "
-                              "(*name) are expanded; a study config holds a few thousand (an alias bomb?)")
+            raise ConfigError(
+                f"config file '{where}': holds more than {MAX_VALUES:,} values once its YAML aliases "
+                "(*name) are expanded; a study config holds a few thousand (an alias bomb?)"
+            )
         stack.pop()
     return sizes[id(root)]
 
@@ -95,8 +106,10 @@ def read_config_text(text: str | bytes, where: str) -> dict:
     if data is None:
         return {}
     if not isinstance(data, dict):
-        raise ConfigError(f"config file '{where}': its top level is a {type(data).__name__}, not a mapping of "
-                          "keys (seed:, turbulence:, lucky:, base:, cases:, figures:)")
+        raise ConfigError(
+            f"config file '{where}': its top level is a {type(data).__name__}, not a mapping of "
+            "keys (seed:, turbulence:, lucky:, base:, cases:, figures:)"
+        )
     return data
 
 

@@ -52,19 +52,23 @@ class StructureTable:
         r = np.maximum(r_m, 1e-12)
         return np.interp(np.log(r), self._log_r, self._ratio) * r ** (5 / 3)
 
-    def weighted_sums(self, targets: np.ndarray, samples: np.ndarray,
-                      weights: np.ndarray) -> np.ndarray:
+    def weighted_sums(self, targets: np.ndarray, samples: np.ndarray, weights: np.ndarray) -> np.ndarray:
         """``sum_p w_p D(|t - s_vp|)`` (n_t, n_v) for targets (n_t, 2), samples (n_v, p, 2)."""
         out = np.empty((targets.shape[0], samples.shape[0]))
-        _weighted_structure_sums(np.ascontiguousarray(targets), np.ascontiguousarray(samples),
-                                 np.ascontiguousarray(weights, dtype=float), self._log_r[0],
-                                 self._log_r[1] - self._log_r[0], self._ratio, out)
+        _weighted_structure_sums(
+            np.ascontiguousarray(targets),
+            np.ascontiguousarray(samples),
+            np.ascontiguousarray(weights, dtype=float),
+            self._log_r[0],
+            self._log_r[1] - self._log_r[0],
+            self._ratio,
+            out,
+        )
         return out
 
 
 @numba.njit(cache=True, nogil=True)
-def _weighted_structure_sums(targets, samples, weights, log_r_first, log_r_step, ratio,
-                             out):  # pragma: no cover (jit)
+def _weighted_structure_sums(targets, samples, weights, log_r_first, log_r_step, ratio, out):  # pragma: no cover (jit)
     """Fused loop for :meth:`StructureTable.weighted_sums` (no temporaries)."""
     n_table = ratio.size
     for t in range(targets.shape[0]):

@@ -43,10 +43,17 @@ def remove_tilt_rows(reconstructor: np.ndarray, points_xy_m: np.ndarray) -> np.n
     return remover.residual(reconstructor.T.astype(np.float32)).T.copy()
 
 
-def target_reconstructor(prior: TurbulencePrior, geometry: SlopeGeometry, noise_rms_rad: float,
-                         points_xy_m: np.ndarray, direction_rad=(0.0, 0.0), layer_indices=None,
-                         cholesky_lower: np.ndarray | None = None, remove_tilt: bool = True,
-                         n_edge: int = 2) -> np.ndarray:
+def target_reconstructor(
+    prior: TurbulencePrior,
+    geometry: SlopeGeometry,
+    noise_rms_rad: float,
+    points_xy_m: np.ndarray,
+    direction_rad=(0.0, 0.0),
+    layer_indices=None,
+    cholesky_lower: np.ndarray | None = None,
+    remove_tilt: bool = True,
+    n_edge: int = 2,
+) -> np.ndarray:
     """``R`` (n_points, n_slopes) float32 [m / rad]: tilt-removed slopes -> optical
     path [m] along ``direction_rad`` at ``points_xy_m``, tilt-removed by default.
 
@@ -55,7 +62,6 @@ def target_reconstructor(prior: TurbulencePrior, geometry: SlopeGeometry, noise_
     """
     if cholesky_lower is None:
         cholesky_lower = factorize(slope_covariance(prior, geometry, noise_rms_rad, n_edge))
-    cross = cross_covariance(prior, geometry, points_xy_m, direction_rad,
-                             layer_indices=layer_indices, n_edge=n_edge)
+    cross = cross_covariance(prior, geometry, points_xy_m, direction_rad, layer_indices=layer_indices, n_edge=n_edge)
     rec = apply_inverse(cholesky_lower, cross).astype(np.float32)
     return remove_tilt_rows(rec, points_xy_m) if remove_tilt else rec

@@ -49,8 +49,12 @@ class SlopeGeometry:
     def from_wfs(cls, wfs, lgs_config, directions_rad=None) -> "SlopeGeometry":
         """From a :class:`luckyao.wfs.shack_hartmann.ShackHartmann` and :class:`luckyao.wfs.beacons.LgsConfig`."""
         directions = lgs_config.directions_rad if directions_rad is None else directions_rad
-        return cls(np.asarray(wfs.subaperture_xy_m, dtype=float), wfs.subaperture_m,
-                   np.atleast_2d(np.asarray(directions, dtype=float)), lgs_config.height_m)
+        return cls(
+            np.asarray(wfs.subaperture_xy_m, dtype=float),
+            wfs.subaperture_m,
+            np.atleast_2d(np.asarray(directions, dtype=float)),
+            lgs_config.height_m,
+        )
 
     @property
     def n_beacons(self) -> int:
@@ -82,13 +86,14 @@ def _remove_beacon_means(matrix: np.ndarray, geometry: SlopeGeometry, axis: int)
     """In place: subtract, along ``axis`` (a slope axis of length n_slopes), each
     beacon's mean x and y slope (the projector P)."""
     shape = list(matrix.shape)
-    new_shape = shape[:axis] + [geometry.n_beacons * 2, geometry.n_valid] + shape[axis + 1:]
+    new_shape = shape[:axis] + [geometry.n_beacons * 2, geometry.n_valid] + shape[axis + 1 :]
     view = matrix.reshape(new_shape)
     view -= view.mean(axis=axis + 1, keepdims=True)
 
 
-def slope_covariance(prior: TurbulencePrior, geometry: SlopeGeometry, noise_rms_rad: float,
-                     n_edge: int = 2) -> np.ndarray:
+def slope_covariance(
+    prior: TurbulencePrior, geometry: SlopeGeometry, noise_rms_rad: float, n_edge: int = 2
+) -> np.ndarray:
     """``S = P G C_xx G^T P + sigma^2 I`` (n_slopes, n_slopes) float64 [rad^2].
 
     For beacons b, b' and layer l the covariance of two sub-aperture slopes
@@ -102,8 +107,9 @@ def slope_covariance(prior: TurbulencePrior, geometry: SlopeGeometry, noise_rms_
     lattice = np.rint(geometry.subaperture_xy_m / d * 2).astype(int)  # 2x: half-integer centres
     lattice = (lattice - lattice.min(axis=0)) // 2
     span = lattice.max(axis=0) + 1
-    offsets = np.stack(np.meshgrid(np.arange(-span[0] + 1, span[0]),
-                                   np.arange(-span[1] + 1, span[1]), indexing="ij"), -1)
+    offsets = np.stack(
+        np.meshgrid(np.arange(-span[0] + 1, span[0]), np.arange(-span[1] + 1, span[1]), indexing="ij"), -1
+    )
     offsets = offsets.reshape(-1, 2).astype(float)  # (n_off, 2) (x, y) in units of d
     points, weights = _edge_points(n_edge)
     pair_offset = points[:, None, :, None, :] - points[None, :, None, :, :]  # (2,2,p,p,2)
@@ -119,7 +125,7 @@ def slope_covariance(prior: TurbulencePrior, geometry: SlopeGeometry, noise_rms_
         strength = fraction ** (-3 / 5) * prior.r0_m
         for a in range(2):
             for c in range(2):
-                sep = ((offsets[:, None, None, :] + pair_offset[a, c][None]) * d * scale)
+                sep = (offsets[:, None, None, :] + pair_offset[a, c][None]) * d * scale
                 sep = sep[None, None] + shift[:, :, None, None, None, :]
                 dist = np.sqrt((sep**2).sum(-1))  # (b, b', n_off, p, p)
                 value = table(dist) * strength ** (-5 / 3)
@@ -137,9 +143,15 @@ def slope_covariance(prior: TurbulencePrior, geometry: SlopeGeometry, noise_rms_
     return cov
 
 
-def cross_covariance(prior: TurbulencePrior, geometry: SlopeGeometry, points_xy_m: np.ndarray,
-                     direction_rad=(0.0, 0.0), source_height_m: float = np.inf,
-                     layer_indices=None, n_edge: int = 2) -> np.ndarray:
+def cross_covariance(
+    prior: TurbulencePrior,
+    geometry: SlopeGeometry,
+    points_xy_m: np.ndarray,
+    direction_rad=(0.0, 0.0),
+    source_height_m: float = np.inf,
+    layer_indices=None,
+    n_edge: int = 2,
+) -> np.ndarray:
     """``A C_xx G^T P`` (n_points, n_slopes) [m rad]: covariance of the optical path
     along a line of sight with the tilt-removed slopes.
 

@@ -8,8 +8,13 @@ EXPORTS = {
     "beacons": ("LgsConfig", "altitude_profile", "elongation_offsets_rad"),
     "shack_hartmann": ("ShackHartmann", "exposure_images"),
     "detector": ("add_noise",),
-    "centroiders": ("CentreOfGravity", "ThresholdedCentreOfGravity", "Correlation", "SlopeEstimator",
-                    "make_centroider"),
+    "centroiders": (
+        "CentreOfGravity",
+        "ThresholdedCentreOfGravity",
+        "Correlation",
+        "SlopeEstimator",
+        "make_centroider",
+    ),
     "calibration": ("BeaconSeeing", "SlopeResponse", "measure_response", "reference_spot_spectra"),
     "sensor": ("LgsSensor", "measure_slopes"),
 }

@@ -59,16 +59,14 @@ class LgsConfig:
     @classmethod
     def sodium(cls, **overrides) -> "LgsConfig":
         """Sodium alternative: 90 km, 589 nm, Gaussian layer of 10 km FWHM (assumed)."""
-        values = dict(height_m=90e3, wavelength_m=589e-9, profile="gaussian",
-                      profile_width_m=10e3)
+        values = dict(height_m=90e3, wavelength_m=589e-9, profile="gaussian", profile_width_m=10e3)
         values.update(overrides)
         return cls(**values)
 
     @property
     def directions_rad(self) -> np.ndarray:
         """Beacon directions (n_beacons, 2) [rad], ``(theta_x, theta_y)``."""
-        return asterism_directions_rad(self.n_beacons, self.asterism_diameter_arcsec,
-                                       self.asterism_rotation_deg)
+        return asterism_directions_rad(self.n_beacons, self.asterism_diameter_arcsec, self.asterism_rotation_deg)
 
     @property
     def launch_xy_m(self) -> np.ndarray:
@@ -104,8 +102,7 @@ def altitude_profile(config: LgsConfig, n_samples: int) -> tuple[np.ndarray, np.
     return z_m, weights / weights.sum()
 
 
-def elongation_offsets_rad(subaperture_xy_m, launch_xy_m, beacon_height_m: float,
-                           altitudes_m) -> np.ndarray:
+def elongation_offsets_rad(subaperture_xy_m, launch_xy_m, beacon_height_m: float, altitudes_m) -> np.ndarray:
     """Angular offsets (n_sub, n_z, 2) [rad] of backscatter at ``altitudes_m``.
 
     Seen from a sub-aperture at ``p`` (n_sub, 2) [m], the beam point at altitude

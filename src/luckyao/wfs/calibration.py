@@ -58,8 +58,11 @@ class BeaconSeeing:
     def _layers(self):
         """(r0 [m at 500 nm], L0 [m]) of each layer below the beacon, on the pupil."""
         scales = footprint_scale(self.heights_m, self.beacon_height_m)
-        return [(self.r0_500nm_m * f ** (-3 / 5) / c, self.outer_scale_m / c)
-                for f, c in zip(self.cn2_fraction, scales) if f > 0 and c > 0]
+        return [
+            (self.r0_500nm_m * f ** (-3 / 5) / c, self.outer_scale_m / c)
+            for f, c in zip(self.cn2_fraction, scales)
+            if f > 0 and c > 0
+        ]
 
     def psd(self, f_per_m):
         """Phase power spectrum [rad^2 m^2 at 500 nm] on the pupil: the layers' sum."""
@@ -67,8 +70,9 @@ class BeaconSeeing:
 
     def structure_function(self, r_m, wavelength_m: float = REFERENCE_WAVELENGTH_M):
         """Phase structure function [rad^2 at ``wavelength_m``] on the pupil."""
-        return sum(von_karman_structure_function(r_m, r0_at_wavelength(r0, wavelength_m), l0)
-                   for r0, l0 in self._layers())
+        return sum(
+            von_karman_structure_function(r_m, r0_at_wavelength(r0, wavelength_m), l0) for r0, l0 in self._layers()
+        )
 
 
 def reference_spot_spectra(wfs: ShackHartmann, elongation: np.ndarray | None, seeing: BeaconSeeing) -> np.ndarray:
@@ -105,9 +109,16 @@ class SlopeResponse:
         return np.einsum("ijv,bjv->biv", self._inverse, np.asarray(positions, dtype=np.float32))
 
 
-def measure_response(wfs: ShackHartmann, elongation: np.ndarray | None, seeing: BeaconSeeing, centroider,
-                     n_beacons: int, draws: int, rng: np.random.Generator,
-                     dither_rad: float | None = None) -> SlopeResponse:
+def measure_response(
+    wfs: ShackHartmann,
+    elongation: np.ndarray | None,
+    seeing: BeaconSeeing,
+    centroider,
+    n_beacons: int,
+    draws: int,
+    rng: np.random.Generator,
+    dither_rad: float | None = None,
+) -> SlopeResponse:
     """The response of ``centroider`` on ``wfs`` by push-pull dithers on ``draws`` x
     ``n_beacons`` (<= 4) independent turbulence draws of ``seeing`` (module docstring).
 
@@ -126,12 +137,15 @@ def measure_response(wfs: ShackHartmann, elongation: np.ndarray | None, seeing: 
     columns = np.empty((draws, n_beacons, 2, 2, wfs.n_valid))
     for d in range(draws):
         down_screen, up_screen = periodic_screen_pair(amplitude, rng)
-        down = np.stack([down_screen[i:i + n, j:j + n] for i, j in corners])[None]
-        up = np.stack([up_screen[i:i + n_launch, j:j + n_launch] for i, j in corners])[None]
+        down = np.stack([down_screen[i : i + n, j : j + n] for i, j in corners])[None]
+        up = np.stack([up_screen[i : i + n_launch, j : j + n_launch] for i, j in corners])[None]
         for axis in range(2):
-            plus, minus = (centroider.positions(exposure_images(wfs, down + sign * ramps[axis], REFERENCE_WAVELENGTH_M,
-                                                                elongation, up)).astype(float)
-                           for sign in (1.0, -1.0))
+            plus, minus = (
+                centroider.positions(
+                    exposure_images(wfs, down + sign * ramps[axis], REFERENCE_WAVELENGTH_M, elongation, up)
+                ).astype(float)
+                for sign in (1.0, -1.0)
+            )
             columns[d, :, :, axis] = (plus - minus) / (2 * dither)
     columns = columns.reshape(draws * n_beacons, 2, 2, wfs.n_valid)
     return SlopeResponse(columns.mean(axis=0), columns.std(axis=0, ddof=1) / np.sqrt(len(columns)))

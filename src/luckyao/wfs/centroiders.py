@@ -182,8 +182,7 @@ class SlopeEstimator:
         return subtract_tilt(self.response.apply(self.centroider.positions(images)))
 
 
-def make_centroider(name: str, wfs: ShackHartmann, threshold: float = 0.0,
-                    reference_spectra: np.ndarray | None = None):
+def make_centroider(name: str, wfs: ShackHartmann, threshold: float = 0.0, reference_spectra: np.ndarray | None = None):
     """The centroider called ``name`` (one of :data:`CENTROIDERS`) for ``wfs``;
     ``tcog`` takes its ``threshold``, ``correlation`` its ``reference_spectra``."""
     if name == "cog":

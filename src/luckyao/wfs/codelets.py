@@ -54,8 +54,7 @@ class Codelet:
 
     def combine(self, pairs):
         """Term ``sum(coefficient * term)``; zero terms and coefficients dropped."""
-        pairs = [(term[0], term[1] * c) for term, c in pairs
-                 if term is not None and abs(c) > _ZERO]
+        pairs = [(term[0], term[1] * c) for term, c in pairs if term is not None and abs(c) > _ZERO]
         if not pairs:
             return None
         if len(pairs) == 1 and abs(abs(pairs[0][1]) - 1) < _ZERO:
@@ -72,8 +71,7 @@ class Codelet:
 
     # complex values: (re, im) pairs of terms
     def add(self, a, b, sign_b=1):
-        return (self.combine([(a[0], 1), (b[0], sign_b)]),
-                self.combine([(a[1], 1), (b[1], sign_b)]))
+        return (self.combine([(a[0], 1), (b[0], sign_b)]), self.combine([(a[1], 1), (b[1], sign_b)]))
 
     def rotate(self, a, w: complex):
         """``a * w`` for a constant ``w``."""
@@ -91,8 +89,7 @@ class Codelet:
         for name, _, reads in reversed(self._statements):
             if name in live:
                 live.update(reads)
-        return [f"{indent}{name} = {expression}" for name, expression, _ in self._statements
-                if name in live]
+        return [f"{indent}{name} = {expression}" for name, expression, _ in self._statements if name in live]
 
 
 def _negative(term):

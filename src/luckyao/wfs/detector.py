@@ -3,8 +3,9 @@
 import numpy as np
 
 
-def add_noise(images: np.ndarray, photons_per_subaperture: float, read_noise_e: float,
-              rng: np.random.Generator) -> np.ndarray:
+def add_noise(
+    images: np.ndarray, photons_per_subaperture: float, read_noise_e: float, rng: np.random.Generator
+) -> np.ndarray:
     """Photon (Poisson) and read (Gaussian, ``read_noise_e`` rms) noise, new array.
 
     ``images`` are in units of a full sub-aperture's flux over the exposure

@@ -11,8 +11,9 @@ be cached: every process would spend seconds of LLVM optimisation on it).
 # ruff: noqa: F821  (the free names are bound in the generated module)
 
 
-def exposure(phase, n_steps, row_m, ratio, norm, sources, amp, lane_subaperture, elongation,
-             spot, ey, ex, images):  # pragma: no cover (jit)
+def exposure(
+    phase, n_steps, row_m, ratio, norm, sources, amp, lane_subaperture, elongation, spot, ey, ex, images
+):  # pragma: no cover (jit)
     """images[b, v, j, k] of one exposure.
 
     ``phase`` flat (T, n_b, n, n) [rad at the phase wavelength, x ``ratio``
@@ -38,11 +39,11 @@ def exposure(phase, n_steps, row_m, ratio, norm, sources, amp, lane_subaperture,
         for b in range(n_b):
             chunk = b * n_amp + a
             for t in range(n_steps):
-                gather(phase[t * step:(t + 1) * step], sources[chunk], row_m, n_in, phi)
+                gather(phase[t * step : (t + 1) * step], sources[chunk], row_m, n_in, phi)
                 columns(phi, ratio, amp[a], g)
                 correlate(g, h, t > 0)
             spectrum(h, c)
-            pixels(c, el, w[b * size_w:(b + 1) * size_w], pix)
+            pixels(c, el, w[b * size_w : (b + 1) * size_w], pix)
             for lane in range(lanes):
                 v = lane_subaperture[a, lane]
                 if v >= 0:

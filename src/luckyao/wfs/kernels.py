@@ -38,11 +38,12 @@ from .codelets import Codelet, dft, load_module, term_value
 
 # numba's disk cache keys a kernel by its own file: this digest of the intrinsics the kernels
 # inline makes an edit of theirs recompile them (tests/test_simd.py keeps it current)
-# intrinsics digest (simd.py): 1bbca53bd66fda7d
+# intrinsics digest (simd.py): 86b3bc4b14f3bbee
 
 _U = numba.uint64  # unsigned offsets keep the lane loops vectorisable
 _FASTMATH = {"contract"}  # fused multiply-adds; no reassociation
 _LAG_GROUP = 8  # lags accumulated together in registers by the autocorrelation
+
 
 # --- generated straight-line kernels ---------------------------------------------
 # Complex arrays are one float32 array, real parts then imaginary parts: few
@@ -52,8 +53,10 @@ def _stored(codelet: Codelet, values, array: str, offset: str, stride: int, im_o
     ``array[offset + i stride]`` (real part) and ``+ im_offset`` (imaginary part)."""
     lines = codelet.source([t for v in values for t in v], " " * 12)
     for i, (re, im) in enumerate(values):
-        lines += [f"            {array}[{offset} + {i * stride}] = {term_value(re)}",
-                  f"            {array}[{offset} + {im_offset + i * stride}] = {term_value(im)}"]
+        lines += [
+            f"            {array}[{offset} + {i * stride}] = {term_value(re)}",
+            f"            {array}[{offset} + {im_offset + i * stride}] = {term_value(im)}",
+        ]
     return lines
 
 
@@ -61,52 +64,58 @@ def _columns_source(n_fft: int, n_in: int, lanes: int) -> tuple[list[str], dict]
     """Fields and their y DFTs ``g[x, ky, l] = sum_{y < n_in} f[x, y, l] exp(-2 pi i ky y / N)``,
     ``f = amp exp(i ratio phi)`` with ``amp``, ``phi`` (x, y, L) (pruned DFT)."""
     codelet = Codelet()
-    field = [(codelet.input(f"fr{y}"), codelet.input(f"fi{y}")) if y < n_in else (None, None)
-             for y in range(n_fft)]
+    field = [(codelet.input(f"fr{y}"), codelet.input(f"fi{y}")) if y < n_in else (None, None) for y in range(n_fft)]
     spectrum = dft(codelet, field)
     im = n_in * n_fft * lanes
-    lines = ["def columns(phi, ratio, amp, g):",
-             f"    for x in range({n_in}):",
-             f"        for lane in range({lanes}):",
-             f"            o = _U(x * {n_in * lanes} + lane)",
-             f"            og = _U(x * {n_fft * lanes} + lane)"]
+    lines = [
+        "def columns(phi, ratio, amp, g):",
+        f"    for x in range({n_in}):",
+        f"        for lane in range({lanes}):",
+        f"            o = _U(x * {n_in * lanes} + lane)",
+        f"            og = _U(x * {n_fft * lanes} + lane)",
+    ]
     for y in range(n_in):
-        lines += [f"            c{y}, s{y} = sincos(phi[o + {y * lanes}] * ratio)",
-                  f"            fr{y} = amp[o + {y * lanes}] * c{y}",
-                  f"            fi{y} = amp[o + {y * lanes}] * s{y}"]
+        lines += [
+            f"            c{y}, s{y} = sincos(phi[o + {y * lanes}] * ratio)",
+            f"            fr{y} = amp[o + {y * lanes}] * c{y}",
+            f"            fi{y} = amp[o + {y * lanes}] * s{y}",
+        ]
     return lines + _stored(codelet, spectrum, "g", "og", lanes, im), codelet.constants
 
 
 def _correlate_source(n_fft: int, n_in: int, lanes: int, n_lags: int) -> tuple[list[str], dict]:
     """``h[ky, p, l] (+)= sum_x g[x - p, ky, l] conj g[x, ky, l]`` for ``p < n_lags``
-(``+=`` if ``accumulate``, else ``=``).
+    (``+=`` if ``accumulate``, else ``=``).
 
-    Lags go in groups of ``_LAG_GROUP`` whose sums stay in registers; each
-    group reloads ``g`` (it follows stores to ``h``), which keeps the register
-    pressure low.
+        Lags go in groups of ``_LAG_GROUP`` whose sums stay in registers; each
+        group reloads ``g`` (it follows stores to ``h``), which keeps the register
+        pressure low.
     """
     column, g_im, h_im = n_fft * lanes, n_in * n_fft * lanes, n_fft * n_lags * lanes
-    lines = ["def correlate(g, h, accumulate):",
-             "    zero = np.float32(0.0)",
-             f"    for ky in range({n_fft}):",
-             f"        for lane in range({lanes}):",
-             f"            o = _U(ky * {lanes} + lane)",
-             f"            oh = _U(ky * {n_lags * lanes} + lane)"]
+    lines = [
+        "def correlate(g, h, accumulate):",
+        "    zero = np.float32(0.0)",
+        f"    for ky in range({n_fft}):",
+        f"        for lane in range({lanes}):",
+        f"            o = _U(ky * {lanes} + lane)",
+        f"            oh = _U(ky * {n_lags * lanes} + lane)",
+    ]
     for first in range(0, n_lags, _LAG_GROUP):
         lags = range(first, min(first + _LAG_GROUP, n_lags))
         sums = {p: (f"sr{p}_0", f"si{p}_0") for p in lags}
         for p in lags:
             lines.append(f"            sr{p}_0 = h[oh + {p * lanes}] if accumulate else zero")
             if p:
-                lines.append(f"            si{p}_0 = h[oh + {h_im + p * lanes}] "
-                             "if accumulate else zero")
+                lines.append(f"            si{p}_0 = h[oh + {h_im + p * lanes}] if accumulate else zero")
         loaded = set()
         for x in range(first, n_in):
             for x_load in [x] + [x - p for p in lags if p <= x]:
                 if x_load not in loaded:
                     loaded.add(x_load)
-                    lines += [f"            r{x_load}_{first} = g[o + {x_load * column}]",
-                              f"            i{x_load}_{first} = g[o + {g_im + x_load * column}]"]
+                    lines += [
+                        f"            r{x_load}_{first} = g[o + {x_load * column}]",
+                        f"            i{x_load}_{first} = g[o + {g_im + x_load * column}]",
+                    ]
             for p in [p for p in lags if p <= x]:
                 a, b = f"{x - p}_{first}", f"{x}_{first}"
                 re, im = sums[p]
@@ -115,8 +124,10 @@ def _correlate_source(n_fft: int, n_in: int, lanes: int, n_lags: int) -> tuple[l
                 if p:  # lag 0: sum |g|^2, real
                     lines.append(f"            {sums[p][1]} = {im} + i{a} * r{b} - r{a} * i{b}")
         for p in lags:
-            lines += [f"            h[oh + {p * lanes}] = {sums[p][0]}",
-                      f"            h[oh + {h_im + p * lanes}] = {sums[p][1]}"]
+            lines += [
+                f"            h[oh + {p * lanes}] = {sums[p][0]}",
+                f"            h[oh + {h_im + p * lanes}] = {sums[p][1]}",
+            ]
     return lines, {}
 
 
@@ -128,13 +139,14 @@ def _spectrum_source(n_fft: int, lanes: int, n_lags: int) -> tuple[list[str], di
     spectrum = dft(codelet, rows)
     wanted = [spectrum[q % n_fft] for q in range(1 - n_lags, n_lags)]
     row, h_im, c_im = n_lags * lanes, n_fft * n_lags * lanes, len(wanted) * n_lags * lanes
-    lines = ["def spectrum(h, c):",
-             f"    for p in range({n_lags}):",
-             f"        for lane in range({lanes}):",
-             f"            o = _U(p * {lanes} + lane)"]
+    lines = [
+        "def spectrum(h, c):",
+        f"    for p in range({n_lags}):",
+        f"        for lane in range({lanes}):",
+        f"            o = _U(p * {lanes} + lane)",
+    ]
     for k in range(n_fft):
-        lines += [f"            hr{k} = h[o + {k * row}]",
-                  f"            hi{k} = h[o + {h_im + k * row}]"]
+        lines += [f"            hr{k} = h[o + {k * row}]", f"            hi{k} = h[o + {h_im + k * row}]"]
     return lines + _stored(codelet, wanted, "c", "o", row, c_im), codelet.constants
 
 
@@ -149,49 +161,56 @@ def _pixels_source(lanes: int, n_lags: int, n_pix: int) -> tuple[list[str], dict
     n_q = 2 * n_lags - 1
     c_im, r_im = n_q * n_lags * lanes, n_pix * lanes
     w_im = n_pix * (n_q + 1) * n_lags
-    lines = ["def pixels(c, el, w, out):",
-             f"    r = np.empty({2 * r_im}, np.float32)",
-             "    out[:] = 0.0",
-             f"    for p in range({n_lags}):",
-             "        r[:] = 0.0",
-             f"        for q in range({n_q}):",
-             f"            k = q * {n_lags} + p"]
+    lines = [
+        "def pixels(c, el, w, out):",
+        f"    r = np.empty({2 * r_im}, np.float32)",
+        "    out[:] = 0.0",
+        f"    for p in range({n_lags}):",
+        "        r[:] = 0.0",
+        f"        for q in range({n_q}):",
+        f"            k = q * {n_lags} + p",
+    ]
     lines += [f"            kr{j} = w[k + {j * n_q * n_lags}]" for j in range(n_pix)]
     lines += [f"            ki{j} = w[k + {w_im + j * n_q * n_lags}]" for j in range(n_pix)]
-    lines += [f"            for lane in range({lanes}):",
-              f"                o = _U(k * {lanes} + lane)",
-              "                cr = c[o]",
-              f"                ci = c[o + {c_im}]",
-              "                er = el[o]",
-              f"                ei = el[o + {c_im}]",
-              "                dr = cr * er - ci * ei",
-              "                di = cr * ei + ci * er",
-              "                i = _U(lane)"]
+    lines += [
+        f"            for lane in range({lanes}):",
+        f"                o = _U(k * {lanes} + lane)",
+        "                cr = c[o]",
+        f"                ci = c[o + {c_im}]",
+        "                er = el[o]",
+        f"                ei = el[o + {c_im}]",
+        "                dr = cr * er - ci * ei",
+        "                di = cr * ei + ci * er",
+        "                i = _U(lane)",
+    ]
     for j in range(n_pix):
-        lines += [f"                r[i + {j * lanes}] += kr{j} * dr - ki{j} * di",
-                  f"                r[i + {r_im + j * lanes}] += kr{j} * di + ki{j} * dr"]
+        lines += [
+            f"                r[i + {j * lanes}] += kr{j} * dr - ki{j} * di",
+            f"                r[i + {r_im + j * lanes}] += kr{j} * di + ki{j} * dr",
+        ]
     x = n_pix * n_q * n_lags
     lines += [f"        xr{k} = w[p + {x + k * n_lags}]" for k in range(n_pix)]
     lines += [f"        xi{k} = w[p + {w_im + x + k * n_lags}]" for k in range(n_pix)]
     lines += [f"        for lane in range({lanes}):", "            i = _U(lane)"]
     for j in range(n_pix):
-        lines += [f"            rr = r[i + {j * lanes}]",
-                  f"            ri = r[i + {r_im + j * lanes}]"]
-        lines += [f"            out[i + {(j * n_pix + k) * lanes}] += rr * xr{k} - ri * xi{k}"
-                  for k in range(n_pix)]
+        lines += [f"            rr = r[i + {j * lanes}]", f"            ri = r[i + {r_im + j * lanes}]"]
+        lines += [f"            out[i + {(j * n_pix + k) * lanes}] += rr * xr{k} - ri * xi{k}" for k in range(n_pix)]
     return lines, {}
 
 
-_SOURCES = {"columns": _columns_source, "correlate": _correlate_source, "pixels": _pixels_source,
-            "spectrum": _spectrum_source}
+_SOURCES = {
+    "columns": _columns_source,
+    "correlate": _correlate_source,
+    "pixels": _pixels_source,
+    "spectrum": _spectrum_source,
+}
 
 
 @cache
 def _generated(name: str, *size: int):
     """Compiled generated kernel ``name`` (a key of ``_SOURCES``) of one size."""
     source, constants = _SOURCES[name](*size)
-    lines = ['"""Generated by luckyao.wfs.kernels; do not edit."""', "import numba",
-             "import numpy as np"]
+    lines = ['"""Generated by luckyao.wfs.kernels; do not edit."""', "import numba", "import numpy as np"]
     if any("sincos(" in line for line in source):
         lines += [f"from luckyao.optics.sincos import sincos  # {SINCOS_DIGEST}"]
     lines += ["", "_U = numba.uint64"]
@@ -211,8 +230,17 @@ def gather(phase, source, row_m, n_in, phi):  # pragma: no cover (jit)
         rows = min(LANES, lanes - first)
         for y in range(n_in):
             for x in range(0, n_in, LANES):
-                transpose(phase, y * row_m + x, source, first, rows, min(LANES, n_in - x), phi,
-                          (x * n_in + y) * lanes + first, n_in * lanes)
+                transpose(
+                    phase,
+                    y * row_m + x,
+                    source,
+                    first,
+                    rows,
+                    min(LANES, n_in - x),
+                    phi,
+                    (x * n_in + y) * lanes + first,
+                    n_in * lanes,
+                )
 
 
 @numba.njit(cache=True, nogil=True)
@@ -297,11 +325,18 @@ def _driver(template, size: tuple[int, ...], constants: dict[str, object], codel
     names bound to ``constants`` (name -> value or Python expression) and to the generated
     ``codelets`` (name -> :func:`_generated` arguments), in a generated module of one
     ``size`` that numba caches on disk (:func:`luckyao.wfs.codelets.load_module`)."""
-    lines = ['"""Generated by luckyao.wfs.kernels; do not edit."""', "import numba", "import numpy as np",
-             f"from luckyao.wfs.kernels import _generated, gather, pixel_weights  # {_KERNELS_DIGEST}", ""]
+    lines = [
+        '"""Generated by luckyao.wfs.kernels; do not edit."""',
+        "import numba",
+        "import numpy as np",
+        f"from luckyao.wfs.kernels import _generated, gather, pixel_weights  # {_KERNELS_DIGEST}",
+        "",
+    ]
     lines += [f"{name} = {value}" for name, value in constants.items()]
-    lines += [f"{name} = _generated{arguments!r}  # {_generated(*arguments).py_func.__module__}"
-              for name, arguments in codelets.items()]
+    lines += [
+        f"{name} = _generated{arguments!r}  # {_generated(*arguments).py_func.__module__}"
+        for name, arguments in codelets.items()
+    ]
     lines += ["", "", "@numba.njit(cache=True, nogil=True)", inspect.getsource(template)]
     module = load_module("_".join(map(str, (template.__name__, *size))), "\n".join(lines))
     return getattr(module, template.__name__)
@@ -313,11 +348,25 @@ def exposure_kernel(n_fft: int, n_in: int, lanes: int, n_lags: int, n_pix: int):
     ``n_in`` sub-apertures, DFTs of ``n_fft`` (power of 2, >= 2 n_in), chunks of ``lanes``
     and ``n_pix`` pixels."""
     n_q = 2 * n_lags - 1
-    return _driver(drivers.exposure, (n_fft, n_in, lanes, n_lags, n_pix), {
-        "n_fft": n_fft, "n_in": n_in, "lanes": lanes, "n_lags": n_lags, "n_pix": n_pix, "n_q": n_q,
-        "size_w": 2 * n_pix * (n_q + 1) * n_lags}, {
-        "columns": ("columns", n_fft, n_in, lanes), "correlate": ("correlate", n_fft, n_in, lanes, n_lags),
-        "spectrum": ("spectrum", n_fft, lanes, n_lags), "pixels": ("pixels", lanes, n_lags, n_pix)})
+    return _driver(
+        drivers.exposure,
+        (n_fft, n_in, lanes, n_lags, n_pix),
+        {
+            "n_fft": n_fft,
+            "n_in": n_in,
+            "lanes": lanes,
+            "n_lags": n_lags,
+            "n_pix": n_pix,
+            "n_q": n_q,
+            "size_w": 2 * n_pix * (n_q + 1) * n_lags,
+        },
+        {
+            "columns": ("columns", n_fft, n_in, lanes),
+            "correlate": ("correlate", n_fft, n_in, lanes, n_lags),
+            "spectrum": ("spectrum", n_fft, lanes, n_lags),
+            "pixels": ("pixels", lanes, n_lags, n_pix),
+        },
+    )
 
 
 @cache
@@ -328,9 +377,22 @@ def uplink_kernel(n_fft: int, n_launch: int, n_steps: int, n_beacons: int, n_lag
     vectorises) with padding."""
     n_fields = n_steps * n_beacons
     lanes = max(16, -(-n_fields // 8) * 8)
-    return _driver(drivers.uplink_otf, (n_fft, n_launch, n_steps, n_beacons, n_lags), {
-        "n_fft": n_fft, "n_launch": n_launch, "n_steps": n_steps, "n_beacons": n_beacons, "n_lags": n_lags,
-        "lanes": lanes, "n_q": 2 * n_lags - 1,
-        "sources": f"(np.minimum(np.arange({lanes}), {n_fields - 1}) * {n_launch * n_launch}).astype(np.int32)"}, {
-        "columns": ("columns", n_fft, n_launch, lanes), "correlate": ("correlate", n_fft, n_launch, lanes, n_lags),
-        "spectrum": ("spectrum", n_fft, lanes, n_lags)})
+    return _driver(
+        drivers.uplink_otf,
+        (n_fft, n_launch, n_steps, n_beacons, n_lags),
+        {
+            "n_fft": n_fft,
+            "n_launch": n_launch,
+            "n_steps": n_steps,
+            "n_beacons": n_beacons,
+            "n_lags": n_lags,
+            "lanes": lanes,
+            "n_q": 2 * n_lags - 1,
+            "sources": f"(np.minimum(np.arange({lanes}), {n_fields - 1}) * {n_launch * n_launch}).astype(np.int32)",
+        },
+        {
+            "columns": ("columns", n_fft, n_launch, lanes),
+            "correlate": ("correlate", n_fft, n_launch, lanes, n_lags),
+            "spectrum": ("spectrum", n_fft, lanes, n_lags),
+        },
+    )

@@ -23,20 +23,24 @@ from .detector import add_noise
 from .shack_hartmann import ShackHartmann, exposure_images, lgs_elongation_otf
 
 
-def measure_slopes(wfs: ShackHartmann, downlink_phase_rad: np.ndarray,
-                   phase_wavelength_m: float, elongation: np.ndarray | None = None,
-                   uplink_phase_rad: np.ndarray | None = None,
-                   photons_per_subaperture: float | None = None, read_noise_e: float = 0.0,
-                   rng: np.random.Generator | None = None,
-                   estimator: SlopeEstimator | None = None) -> np.ndarray:
+def measure_slopes(
+    wfs: ShackHartmann,
+    downlink_phase_rad: np.ndarray,
+    phase_wavelength_m: float,
+    elongation: np.ndarray | None = None,
+    uplink_phase_rad: np.ndarray | None = None,
+    photons_per_subaperture: float | None = None,
+    read_noise_e: float = 0.0,
+    rng: np.random.Generator | None = None,
+    estimator: SlopeEstimator | None = None,
+) -> np.ndarray:
     """Tilt-removed slopes (n_beacons, 2, n_valid) [rad] of one exposure.
 
     Chains the optics (:func:`.shack_hartmann.exposure_images`), the detector noise
     (:func:`.detector.add_noise`, off unless ``photons_per_subaperture`` is given) and
     the ``estimator`` (default: centre of gravity, uncalibrated).
     """
-    images = exposure_images(wfs, downlink_phase_rad, phase_wavelength_m, elongation,
-                             uplink_phase_rad)
+    images = exposure_images(wfs, downlink_phase_rad, phase_wavelength_m, elongation, uplink_phase_rad)
     if photons_per_subaperture is not None:
         if rng is None:
             raise ValueError("noise needs an explicit rng")
@@ -54,9 +58,18 @@ class LgsSensor:
     (default: centre of gravity, uncalibrated).
     """
 
-    def __init__(self, lgs: LgsConfig, wfs: ShackHartmann, exposure_steps: int, layers: list[Layer],
-                 screens: ScreenSet, seed: int, photons_per_subaperture: float | None = None,
-                 read_noise_e: float = 0.0, estimator: SlopeEstimator | None = None):
+    def __init__(
+        self,
+        lgs: LgsConfig,
+        wfs: ShackHartmann,
+        exposure_steps: int,
+        layers: list[Layer],
+        screens: ScreenSet,
+        seed: int,
+        photons_per_subaperture: float | None = None,
+        read_noise_e: float = 0.0,
+        estimator: SlopeEstimator | None = None,
+    ):
         self.lgs, self.wfs, self.exposure_steps = lgs, wfs, exposure_steps
         self.estimator = SlopeEstimator(CentreOfGravity(wfs)) if estimator is None else estimator
         self.photons = photons_per_subaperture
@@ -65,8 +78,9 @@ class LgsSensor:
         height = lgs.height_m
         directions = lgs.directions_rad
         launch = lgs.launch_xy_m
-        self._down = Propagator(layers, screens, [LineOfSight(tx, ty, height) for tx, ty in directions],
-                                wfs.grid, mask=wfs.sensed_mask)
+        self._down = Propagator(
+            layers, screens, [LineOfSight(tx, ty, height) for tx, ty in directions], wfs.grid, mask=wfs.sensed_mask
+        )
         up_los = [uplink_line_of_sight(direction, launch, height) for direction in directions]
         self._up = Propagator(layers, screens, up_los, wfs.launch_grid, centre_xy_m=tuple(launch))
         self.elongation = lgs_elongation_otf(wfs, lgs)
@@ -86,9 +100,17 @@ class LgsSensor:
 
     def slopes(self) -> np.ndarray:
         """Tilt-removed slopes (n_beacons, 2, n_valid) [rad] of the sampled exposure."""
-        return measure_slopes(self.wfs, self._down_buffer, REFERENCE_WAVELENGTH_M, self.elongation,
-                              self._up_buffer, self.photons, self.read_noise_e,
-                              self.rng if self.photons is not None else None, self.estimator)
+        return measure_slopes(
+            self.wfs,
+            self._down_buffer,
+            REFERENCE_WAVELENGTH_M,
+            self.elongation,
+            self._up_buffer,
+            self.photons,
+            self.read_noise_e,
+            self.rng if self.photons is not None else None,
+            self.estimator,
+        )
 
     def exposure_slopes(self, steps, layer_scales) -> np.ndarray:
         """Tilt-removed slopes (n_beacons, 2, n_valid) [rad] of the exposure of

@@ -155,8 +155,7 @@ class ShackHartmann:
     def harmonics(self) -> tuple[np.ndarray, np.ndarray]:
         """Spatial frequencies ``(f_y (M,), f_x (M//2+1,))`` [cycles/rad] of ``rfft2``."""
         m = self.fft_size
-        return (np.fft.fftfreq(m) * m / self.period_rad,
-                np.fft.rfftfreq(m) * m / self.period_rad)
+        return (np.fft.fftfreq(m) * m / self.period_rad, np.fft.rfftfreq(m) * m / self.period_rad)
 
     @cached_property
     def pixel_centres_rad(self) -> np.ndarray:
@@ -179,8 +178,9 @@ class ShackHartmann:
         def integral(q):
             q = q[None, :]
             with np.errstate(invalid="ignore", divide="ignore"):
-                value = (np.exp(2j * np.pi * q * upper[:, None])
-                         - np.exp(2j * np.pi * q * lower[:, None])) / (2j * np.pi * q)
+                value = (np.exp(2j * np.pi * q * upper[:, None]) - np.exp(2j * np.pi * q * lower[:, None])) / (
+                    2j * np.pi * q
+                )
             return np.where(q == 0, (upper - lower)[:, None], value)
 
         q_y = np.fft.fftfreq(m) * m
@@ -223,8 +223,9 @@ def _add_power(spectrum, out, overwrite):  # pragma: no cover (jit)
         flat_o[k] = power if overwrite else flat_o[k] + power
 
 
-def intensity_samples(wfs: ShackHartmann, phase_rad: np.ndarray, phase_wavelength_m: float,
-                      out: np.ndarray | None = None) -> np.ndarray:
+def intensity_samples(
+    wfs: ShackHartmann, phase_rad: np.ndarray, phase_wavelength_m: float, out: np.ndarray | None = None
+) -> np.ndarray:
     """Sub-aperture intensities ``|FFT_M(A exp(i phi))|^2``, no LGS spot.
 
     ``phase_rad`` (n_beacons, n, n) on ``wfs.grid`` [rad at ``phase_wavelength_m``]
@@ -293,15 +294,13 @@ def lgs_elongation_otf(wfs: ShackHartmann, config: LgsConfig) -> np.ndarray:
     sample_rad = wfs.period_rad / wfs.fft_size
     n_z = int(np.clip(np.ceil(16 * baseline * span / sample_rad), 8, 2048))
     z_m, weights = altitude_profile(config, n_z)
-    offsets = elongation_offsets_rad(wfs.subaperture_xy_m, config.launch_xy_m,
-                                     config.height_m, z_m)
+    offsets = elongation_offsets_rad(wfs.subaperture_xy_m, config.launch_xy_m, config.height_m, z_m)
     otf = elongation_otf(wfs, offsets, weights)
     otf.flags.writeable = False  # static: exposure_images keeps its lane layout
     return otf
 
 
-def uplink_otf(wfs: ShackHartmann, uplink_phase_rad: np.ndarray,
-               phase_wavelength_m: float) -> np.ndarray:
+def uplink_otf(wfs: ShackHartmann, uplink_phase_rad: np.ndarray, phase_wavelength_m: float) -> np.ndarray:
     """OTF (..., M, M//2+1) complex64 of the laser spot on the sky.
 
     The spot is ``|FFT(A_launch exp(i phi_up))|^2`` (far field of the focused
@@ -350,20 +349,20 @@ class _ExposurePlan:
     :mod:`luckyao.wfs.kernels`).
     """
 
-    exposure: object              # luckyao.wfs.kernels.exposure_kernel(...)
-    uplink_otf: object            # luckyao.wfs.kernels.uplink_kernel(...)
+    exposure: object  # luckyao.wfs.kernels.exposure_kernel(...)
+    uplink_otf: object  # luckyao.wfs.kernels.uplink_kernel(...)
     n_fft: int
     n_lags: int
-    sources: np.ndarray           # (n_chunks, L) int32 offset of each lane's block in one step
-    amp: np.ndarray               # (n_amp, n_s n_s L) float32 transmission [x, y, lane]
+    sources: np.ndarray  # (n_chunks, L) int32 offset of each lane's block in one step
+    amp: np.ndarray  # (n_amp, n_s n_s L) float32 transmission [x, y, lane]
     lane_subaperture: np.ndarray  # (n_amp, L) int64
-    q_index: np.ndarray           # (n_q,) int64 harmonic q = -(n_lags - 1) .. n_lags - 1, mod M
-    point_line: np.ndarray        # (n_amp, 2, n_q, n_lags, L) float32 lane OTF 1 (no elongation)
-    ey: np.ndarray                # (n_pix, n_q) complex64 pixel integrals E_y
-    ex: np.ndarray                # (n_pix, n_lags) complex64 weighted E_x
-    point_spot: np.ndarray        # (n_beacons, n_q, n_lags) complex64 ones (no uplink)
-    launch_amp: np.ndarray        # (n_l n_l lanes,) float32 launch mask [x, y, (t, beacon)]
-    elongation_cache: dict        # "otf": (last read-only elongation OTF, its lane layout)
+    q_index: np.ndarray  # (n_q,) int64 harmonic q = -(n_lags - 1) .. n_lags - 1, mod M
+    point_line: np.ndarray  # (n_amp, 2, n_q, n_lags, L) float32 lane OTF 1 (no elongation)
+    ey: np.ndarray  # (n_pix, n_q) complex64 pixel integrals E_y
+    ex: np.ndarray  # (n_pix, n_lags) complex64 weighted E_x
+    point_spot: np.ndarray  # (n_beacons, n_q, n_lags) complex64 ones (no uplink)
+    launch_amp: np.ndarray  # (n_l n_l lanes,) float32 launch mask [x, y, (t, beacon)]
+    elongation_cache: dict  # "otf": (last read-only elongation OTF, its lane layout)
 
 
 def _exposure_plan(wfs: ShackHartmann, n_beacons: int, uplink_steps: int) -> _ExposurePlan:
@@ -392,12 +391,20 @@ def _exposure_plan(wfs: ShackHartmann, n_beacons: int, uplink_steps: int) -> _Ex
     point_line[:, 0] = 1.0
     plan = _ExposurePlan(
         exposure_kernel(n_fft, n_s, lanes, n_lags, wfs.n_pixels),
-        uplink_kernel(_next_pow2(2 * n_launch), n_launch, uplink_steps, n_beacons, n_lags)
-        if uplink_steps else None,
-        n_fft, n_lags, sources.astype(np.int32), np.ascontiguousarray(amp),
-        np.where(v < n_v, v, -1).reshape(n_amp, lanes), q % wfs.fft_size, point_line,
-        np.ascontiguousarray(ey), np.ascontiguousarray(ex),
-        np.ones((n_beacons, q.size, n_lags), dtype=np.complex64), launch_amp.reshape(-1), {})
+        uplink_kernel(_next_pow2(2 * n_launch), n_launch, uplink_steps, n_beacons, n_lags) if uplink_steps else None,
+        n_fft,
+        n_lags,
+        sources.astype(np.int32),
+        np.ascontiguousarray(amp),
+        np.where(v < n_v, v, -1).reshape(n_amp, lanes),
+        q % wfs.fft_size,
+        point_line,
+        np.ascontiguousarray(ey),
+        np.ascontiguousarray(ex),
+        np.ones((n_beacons, q.size, n_lags), dtype=np.complex64),
+        launch_amp.reshape(-1),
+        {},
+    )
     plans[n_beacons, uplink_steps] = plan
     return plan
 
@@ -409,16 +416,19 @@ def _lane_elongation(plan: _ExposurePlan, elongation: np.ndarray) -> np.ndarray:
     if cached is not None and cached[0] is elongation:
         return cached[1]
     lanes = np.empty_like(plan.point_line)
-    lane_otf(np.asarray(elongation, dtype=np.complex64), plan.q_index, plan.n_lags,
-             plan.lane_subaperture, lanes)
+    lane_otf(np.asarray(elongation, dtype=np.complex64), plan.q_index, plan.n_lags, plan.lane_subaperture, lanes)
     if not elongation.flags.writeable:
         plan.elongation_cache["otf"] = (elongation, lanes)
     return lanes
 
 
-def exposure_images(wfs: ShackHartmann, downlink_phase_rad: np.ndarray,
-                    phase_wavelength_m: float, elongation: np.ndarray | None = None,
-                    uplink_phase_rad: np.ndarray | None = None) -> np.ndarray:
+def exposure_images(
+    wfs: ShackHartmann,
+    downlink_phase_rad: np.ndarray,
+    phase_wavelength_m: float,
+    elongation: np.ndarray | None = None,
+    uplink_phase_rad: np.ndarray | None = None,
+) -> np.ndarray:
     """Images of one WFS exposure (mean over its time steps), physical optics.
 
     ``downlink_phase_rad`` (T, n_beacons, n, n) on ``wfs.grid``, cone effect
@@ -445,8 +455,7 @@ def exposure_images(wfs: ShackHartmann, downlink_phase_rad: np.ndarray,
     if downlink.ndim != 4 or downlink.shape[2:] != (wfs.grid.n_pix,) * 2:
         raise ValueError("downlink phase must be (T, n_beacons, n, n)")
     n_steps, n_beacons = downlink.shape[:2]
-    uplink = None if uplink_phase_rad is None else np.ascontiguousarray(uplink_phase_rad,
-                                                                         dtype=np.float32)
+    uplink = None if uplink_phase_rad is None else np.ascontiguousarray(uplink_phase_rad, dtype=np.float32)
     plan = _exposure_plan(wfs, n_beacons, 0 if uplink is None else uplink.shape[0])
     ratio = np.float32(phase_wavelength_m / wfs.wavelength_m)
     if uplink is None:
@@ -460,6 +469,19 @@ def exposure_images(wfs: ShackHartmann, downlink_phase_rad: np.ndarray,
     el = plan.point_line if elongation is None else _lane_elongation(plan, elongation)
     norm = np.float32(1.0 / (plan.n_fft * wfs.samples_per_subaperture**2 * n_steps))
     images = np.empty((n_beacons, wfs.n_valid, wfs.n_pixels, wfs.n_pixels), dtype=np.float32)
-    plan.exposure(downlink.reshape(-1), n_steps, wfs.grid.n_pix, ratio, norm, plan.sources,
-                  plan.amp, plan.lane_subaperture, el, spot, plan.ey, plan.ex, images)
+    plan.exposure(
+        downlink.reshape(-1),
+        n_steps,
+        wfs.grid.n_pix,
+        ratio,
+        norm,
+        plan.sources,
+        plan.amp,
+        plan.lane_subaperture,
+        el,
+        spot,
+        plan.ey,
+        plan.ex,
+        images,
+    )
     return images
