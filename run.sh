@@ -74,9 +74,9 @@ setup_docs() {
 # The habits CI keeps: the code linted and formatted (ruff), the rules formatted (snakefmt)
 # and linted (snakemake --lint, but for the two lints kept by design: tools/lint_rules.py).
 lint() {
-    "$VENV/bin/ruff" check src tests benchmarks docs tools
-    "$VENV/bin/ruff" format --check --quiet src tests benchmarks docs tools
-    "$VENV/bin/snakefmt" --check --quiet Snakefile workflow/rules
+    "$VENV/bin/python" -m ruff check src tests benchmarks docs tools
+    "$VENV/bin/python" -m ruff format --check --quiet src tests benchmarks docs tools
+    "$VENV/bin/python" -m snakefmt --check Snakefile workflow/rules
     "$VENV/bin/python" tools/lint_rules.py
 }
 
@@ -103,7 +103,7 @@ case "$command" in
     docs)
         setup_docs
         # warnings are errors; the gallery's examples (docs/examples/) run during the build
-        exec "$VENV/bin/sphinx-build" -W --keep-going -b html docs docs/_build/html "$@"
+        exec "$VENV/bin/python" -m sphinx -W --keep-going -b html docs docs/_build/html "$@"
         ;;
     *)
         echo "usage: bash run.sh study|test|lint|docs [args...]" >&2
