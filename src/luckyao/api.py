@@ -1,5 +1,5 @@
 """The Python interface: open a study's results as xarray datasets, redraw a figure,
-and run one case from a config dict without Snakemake (for exploration).
+and run one case from a config dict without Snakemake (for exploration)::
 
     import luckyao
     lucky = luckyao.open_case("ltao_r0_13.5cm")            # results/cases/<case>/lucky.nc
