@@ -6,11 +6,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from synthetic import lucky_dataset
 
 from luckyao.figures import FIGURE_KINDS, FigureSettings
 from luckyao.studyspec.study import load_study, validate_study
 from luckyao.studyspec.sweeps import expand_sweeps, sweep_points
+
+from synthetic import lucky_dataset
 
 CONFIG = Path(__file__).resolve().parents[1] / "config"
 N_FRAMES, N_BLOCKS = 100, 5

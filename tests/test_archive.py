@@ -253,6 +253,19 @@ class Zeros(io.RawIOBase):
         return k
 
 
+def verify_in_a_process(archive: Path):
+    """``luckyao verify ARCHIVE`` in a fresh process: its exit code, how far its peak memory grew
+    during the verify [KiB] (the imports excluded), and the finished process (its output)."""
+    script = (
+        "import resource, sys; from luckyao.cli import main; import luckyao.archive.verify; "
+        "before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss; code = main(['verify', sys.argv[1]]); "
+        "print(code, resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - before)"
+    )
+    result = subprocess.run([sys.executable, "-c", script, str(archive)], capture_output=True, text=True, timeout=600)
+    code, growth_kib = map(int, result.stdout.split()[-2:])
+    return code, growth_kib, result
+
+
 def test_verify_reads_a_tar_bomb_in_bounded_memory(tmp_path):
     """A 1.5 MB ``.tar.gz`` holding a 320 MiB member: hashed as a stream (peak memory grows
     by less than 100 MB; reading it whole took 320 MB), refused as not in SHA256SUMS."""
@@ -262,13 +275,7 @@ def test_verify_reads_a_tar_bomb_in_bounded_memory(tmp_path):
         info = tarfile.TarInfo("bomb/results/cases/good/lucky.nc")
         info.size = size
         tar.addfile(info, io.BufferedReader(Zeros(size)))
-    script = (
-        "import resource, sys; from luckyao.cli import main; import luckyao.archive.verify; "
-        "before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss; code = main(['verify', sys.argv[1]]); "
-        "print(code, resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - before)"
-    )
-    result = subprocess.run([sys.executable, "-c", script, str(bomb)], capture_output=True, text=True, timeout=300)
-    code, growth_kib = map(int, result.stdout.split()[-2:])
+    code, growth_kib, result = verify_in_a_process(bomb)
     assert code == 1 and "results/cases/good/lucky.nc: not in SHA256SUMS" in result.stdout, result.stdout
     assert growth_kib < 100_000, f"peak memory grew by {growth_kib / 1024:.0f} MiB"
 
@@ -347,13 +354,7 @@ def test_verify_reads_many_large_benchmark_members_in_bounded_memory(tmp_path):
             info = tarfile.TarInfo(f"bench/results/benchmarks/simulate/case{i}.tsv")
             info.size = size
             tar.addfile(info, io.BufferedReader(Zeros(size)))
-    script = (
-        "import resource, sys; from luckyao.cli import main; import luckyao.archive.verify; "
-        "before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss; code = main(['verify', sys.argv[1]]); "
-        "print(code, resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - before)"
-    )
-    result = subprocess.run([sys.executable, "-c", script, str(bomb)], capture_output=True, text=True, timeout=600)
-    code, growth_kib = map(int, result.stdout.split()[-2:])
+    code, growth_kib, result = verify_in_a_process(bomb)
     assert code == 1 and "claims 16,777,216 bytes, more than verify reads (65,536)" in result.stderr, result.stderr
     assert growth_kib < 100_000, f"peak memory grew by {growth_kib / 1024:.0f} MiB"
 

@@ -8,8 +8,9 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from luckyao.io.datasets import STUDY_JOB, FrameWriter, iter_frame_blocks, open_dataset, provenance, write_dataset
+from luckyao.io.datasets import FrameWriter, iter_frame_blocks, open_dataset, provenance, write_dataset
 from luckyao.io.hashing import sha256
+from luckyao.threads import STUDY_JOB
 
 
 def test_provenance_carries_config_hash_version_and_seed():

@@ -2,9 +2,10 @@
 
 import numpy as np
 import pytest
-from reference import apply_detector, detect
 
 from luckyao.lucky.detector import Detector, KeyedNoise
+
+from reference import apply_detector, detect
 
 
 def two_level_frames(k, n=64):

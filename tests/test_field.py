@@ -9,7 +9,6 @@ commands; the other targets are replayed from the screens and those commands.
 
 import numpy as np
 import pytest
-from reference import shift_frames
 
 from luckyao.atmosphere.screens import ScreenSet, strip_screen
 from luckyao.lucky.accumulation import recentring_shifts_px
@@ -24,6 +23,8 @@ from luckyao.studyspec.products import commands_spec, reconstructor_spec, turbul
 from luckyao.studyspec.resolved import imaged_targets
 from luckyao.studyspec.schema import deep_merge
 from luckyao.studyspec.study import load_study
+
+from reference import shift_frames
 
 DURATION_S = 0.4
 TARGETS_ARCSEC = [[0.0, 0.0], [20.0, 0.0], [40.0, 0.0]]

@@ -1,8 +1,6 @@
 """Nothing wrong is taken as a result: non-finite values and impossible combinations
 are refused with a message naming where, before any compute when they can be known."""
 
-from pathlib import Path
-
 import numpy as np
 import pytest
 import yaml
@@ -13,11 +11,7 @@ from luckyao.studyspec.schema import ConfigError
 from luckyao.studyspec.study import validate_study
 from luckyao.wfs.kernels import centroids
 
-TINY = Path(__file__).parent / "data" / "tiny.yaml"
-
-
-def tiny() -> dict:
-    return yaml.safe_load(TINY.read_text())
+from studies import TINY, tiny, with_name
 
 
 @pytest.mark.parametrize("value", [float("nan"), float("inf")])
@@ -109,16 +103,7 @@ def test_every_problem_is_reported_one_line_each():
 def test_an_unsafe_name_is_refused_naming_its_key(kind, name):
     """Names become file names and command-line words: one pattern for cases, figures and
     detectors (a letter or digit first; letters, digits, _ . + -; never '..')."""
-    study = tiny()
-    if kind == "case":
-        study["cases"][name] = {}
-        key = "cases"
-    elif kind == "figure":
-        study["figures"][name] = study["figures"]["longexp"]
-        key = "figures"
-    else:
-        study["lucky"]["detectors"][name] = {"photons_per_frame": None, "read_noise_e": 0.0}
-        key = "lucky.detectors"
+    study, key = with_name(kind, name)
     with pytest.raises(ConfigError, match=rf"config key '{key}': .* is not a safe name"):
         validate_study(study)
 

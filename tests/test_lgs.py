@@ -1,11 +1,12 @@
 """LGS geometry: asterism, cone footprints, elongation."""
 
 import numpy as np
-from reference import elongation_length_rad
 
 from luckyao.geometry import cone_coordinates, footprint_scale
 from luckyao.units import ARCSEC_RAD
 from luckyao.wfs.beacons import LgsConfig, altitude_profile, elongation_offsets_rad
+
+from reference import elongation_length_rad
 
 
 def test_asterism_is_a_40_arcsec_circle():

@@ -20,26 +20,9 @@ import xarray as xr
 import yaml
 
 from luckyao.cli import main
-from luckyao.io.datasets import STUDY_JOB
+from luckyao.threads import STUDY_JOB
 
-REPO = Path(__file__).resolve().parents[1]
-TINY = REPO / "tests" / "data" / "tiny.yaml"
-
-
-def snakemake(workdir: Path, *args, timeout=900):
-    command = [
-        sys.executable,
-        "-m",
-        "snakemake",
-        "-s",
-        str(REPO / "Snakefile"),
-        "-d",
-        str(workdir),
-        "--cores",
-        "2",
-        *args,
-    ]
-    return subprocess.run(command, capture_output=True, text=True, timeout=timeout)
+from studies import REPO, TINY, snakemake, snakemake_command
 
 
 def planned(result) -> set[tuple[str, str]]:
@@ -349,20 +332,7 @@ def test_a_job_orphaned_by_a_killed_snakemake_keeps_the_study_locked(finished, t
     workdir = copy_of(finished, tmp_path)
     lock = workdir / ".snakemake" / "luckyao-run.lock"
     run = subprocess.Popen(
-        [
-            sys.executable,
-            "-m",
-            "snakemake",
-            "-s",
-            str(REPO / "Snakefile"),
-            "-d",
-            str(workdir),
-            "--cores",
-            "1",
-            "--forcerun",
-            "lucky",
-            "results/cases/good/lucky.nc",
-        ],
+        snakemake_command(workdir, "--forcerun", "lucky", "results/cases/good/lucky.nc", cores=1),
         stdout=subprocess.DEVNULL,
         stderr=subprocess.DEVNULL,
         start_new_session=True,

@@ -2,7 +2,6 @@
 
 import numpy as np
 import pytest
-from reference import detect, shift_and_add, shift_frames
 
 from luckyao.lucky.accumulation import recentring_shifts_px
 from luckyao.lucky.detector import Detector
@@ -12,6 +11,8 @@ from luckyao.lucky.ranking import ExternalCriterion, fraction_counts, rank_frame
 from luckyao.optics.imaging import Camera, Imager
 from luckyao.optics.pupil import Telescope
 from luckyao.seeds import detector_key
+
+from reference import detect, shift_and_add, shift_frames
 
 
 def test_fraction_counts():

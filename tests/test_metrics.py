@@ -2,7 +2,6 @@
 
 import numpy as np
 import pytest
-from reference import d50_arcsec
 from scipy import integrate, optimize, special
 
 from luckyao.lucky import radial_sums
@@ -16,6 +15,8 @@ from luckyao.lucky.metrics import (
 from luckyao.optics.imaging import Camera, Imager
 from luckyao.optics.pupil import Telescope, TiltRemover
 from luckyao.units import ARCSEC_RAD
+
+from reference import d50_arcsec
 
 D_M, OBSCURATION_M = 4.2, 1.2
 EPS = OBSCURATION_M / D_M

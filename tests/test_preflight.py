@@ -6,8 +6,6 @@ a mapping), bounded grids, and one pre-flight of memory and of the disk the stud
 need together."""
 
 import json
-import subprocess
-import sys
 import time
 from pathlib import Path
 
@@ -24,33 +22,16 @@ from luckyao.studyspec.schema import ConfigError
 from luckyao.studyspec.study import validate_study
 from luckyao.studyspec.sweeps import expand_sweeps
 
-REPO = Path(__file__).resolve().parents[1]
-TINY = REPO / "tests" / "data" / "tiny.yaml"
+from studies import REPO, TINY, snakemake, tiny, with_name, with_sweep
 
 LIST_BOMB = "a0: &a0 [1, 2]\n" + "".join(f"a{i}: &a{i} [*a{i - 1}, *a{i - 1}]\n" for i in range(1, 30))
 MAPPING_BOMB = "d0: &d0 {x: 1}\n" + "".join(f"d{i}: &d{i} {{p: *d{i - 1}, q: *d{i - 1}}}\n" for i in range(1, 30))
-
-
-def tiny() -> dict:
-    return yaml.safe_load(TINY.read_text())
 
 
 def check(capsys, *paths) -> tuple[int, str]:
     code = main(["check", *map(str, paths)])
     captured = capsys.readouterr()
     return code, captured.out + captured.err
-
-
-def with_sweep(parameters: dict) -> dict:
-    study = tiny()
-    study["sweeps"]["grid"] = {"parameters": parameters}
-    study["figures"]["grid"] = {
-        "kind": "quality_vs_parameter",
-        "sweep": "grid",
-        "criteria": ["strehl"],
-        "fractions": [1.0],
-    }
-    return study
 
 
 # --- detector names (item 3) ---------------------------------------------------------------
@@ -99,16 +80,7 @@ def test_a_detector_sweep_is_bounded():
 def test_a_name_is_matched_whole_short_and_ascii(kind, name):
     """'good\\n' passed `$` (it matches before a final newline) and made folders with a newline
     in their names; 300 characters failed mid-run (a file name holds 255 bytes)."""
-    study = tiny()
-    if kind == "case":
-        study["cases"][name] = {}
-        key = "cases"
-    elif kind == "figure":
-        study["figures"][name] = study["figures"]["longexp"]
-        key = "figures"
-    else:
-        study["lucky"]["detectors"][name] = {"photons_per_frame": None, "read_noise_e": 0.0}
-        key = "lucky.detectors"
+    study, key = with_name(kind, name)
     with pytest.raises(
         ConfigError,
         match=rf"config key '{key}': .*(is not a safe name|characters long, more than "
@@ -268,19 +240,7 @@ def test_the_workflow_refuses_an_alias_bomb_before_reading_it(bomb, tmp_path):
     (folder / "config" / "config.yaml").write_text(
         TINY.read_text() + "junk:\n" + "".join(f"  {line}\n" for line in bomb.splitlines())
     )
-    command = [
-        sys.executable,
-        "-m",
-        "snakemake",
-        "-s",
-        str(REPO / "Snakefile"),
-        "-d",
-        str(folder),
-        "-n",
-        "--cores",
-        "1",
-    ]
-    result = subprocess.run(command, capture_output=True, text=True, timeout=120)
+    result = snakemake(folder, "-n", cores=1, timeout=120)
     assert result.returncode != 0
     assert (
         "luckyao: invalid study config: config file 'config/config.yaml': holds more than 100,000 values"
@@ -297,21 +257,7 @@ def test_run_sh_refuses_an_overlay_alias_bomb_before_snakemake_merges_it(tmp_pat
     (folder / "config" / "config.yaml").write_text(TINY.read_text())
     overlay = tmp_path / "bomb.yaml"
     overlay.write_text("junk:\n" + "".join(f"  {line}\n" for line in MAPPING_BOMB.splitlines()))
-    command = [
-        sys.executable,
-        "-m",
-        "luckyao.jobs.live_run",
-        "-s",
-        str(REPO / "Snakefile"),
-        "-d",
-        str(folder),
-        "-n",
-        "--cores",
-        "1",
-        "--configfile",
-        str(overlay),
-    ]
-    result = subprocess.run(command, capture_output=True, text=True, timeout=120)
+    result = snakemake(folder, "-n", "--configfile", str(overlay), cores=1, module="luckyao.jobs.live_run", timeout=120)
     assert result.returncode != 0
     assert f"config file '{overlay}': holds more than 100,000 values" in result.stderr, result.stderr[-2000:]
 
@@ -341,21 +287,7 @@ def test_the_dry_run_refuses_what_check_refuses(tmp_path):
     folder = tmp_path / "study"
     (folder / "config").mkdir(parents=True)
     (folder / "config" / "config.yaml").write_text(TINY.read_text())
-    command = [
-        sys.executable,
-        "-m",
-        "snakemake",
-        "-s",
-        str(REPO / "Snakefile"),
-        "-d",
-        str(folder),
-        "-n",
-        "--cores",
-        "1",
-        "--configfile",
-        str(huge(tmp_path)),
-    ]
-    result = subprocess.run(command, capture_output=True, text=True, timeout=300)
+    result = snakemake(folder, "-n", "--configfile", str(huge(tmp_path)), cores=1, timeout=300)
     assert result.returncode != 0
     assert "luckyao: study too large: config key 'cases.ltao': job simulate ltao needs" in result.stderr, result.stderr[
         -2000:

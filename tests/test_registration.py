@@ -6,7 +6,6 @@ import numpy as np
 import pytest
 import scipy.fft
 import xarray as xr
-from reference import detect
 
 from luckyao.atmosphere.statistics import von_karman_psd
 from luckyao.lucky.detector import Detector, KeyedNoise
@@ -28,6 +27,8 @@ from luckyao.lucky.registration import (
 from luckyao.lucky.scoring import MatchedStrehl
 from luckyao.optics.imaging import Camera, Imager
 from luckyao.optics.pupil import Telescope
+
+from reference import detect
 
 N = 64
 SCALE_ARCSEC = 5 / 256  # the study's camera: 800 nm, 4.2 m (1.2 m obscuration), lambda/D = 2.0 px

@@ -2,32 +2,14 @@
 configs with implausible values are warned about by key."""
 
 import copy
-from pathlib import Path
 
 import pytest
-import yaml
 
 from luckyao.studyspec.schema import ConfigError, name_problem
 from luckyao.studyspec.study import plausibility_warnings, unused_cases, validate_study
 from luckyao.studyspec.sweeps import expand_sweeps, sweep_points
 
-TINY = Path(__file__).resolve().parent / "data" / "tiny.yaml"
-
-
-def tiny() -> dict:
-    return yaml.safe_load(TINY.read_text())
-
-
-def with_sweep(parameters: dict, overrides=None) -> dict:
-    study = tiny()
-    study["sweeps"]["grid"] = {"parameters": parameters, **({"overrides": overrides} if overrides else {})}
-    study["figures"]["grid"] = {
-        "kind": "quality_vs_parameter",
-        "sweep": "grid",
-        "criteria": ["strehl"],
-        "fractions": [1.0],
-    }
-    return study
+from studies import tiny, with_sweep
 
 
 def test_a_grid_is_every_combination_named_by_its_values_with_its_values_applied():

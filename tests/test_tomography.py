@@ -1,7 +1,6 @@
 """MAP tomography: von Karman prior and recovery of a known layered phase."""
 
 import numpy as np
-from reference import layer_reconstructor
 from scipy.ndimage import map_coordinates
 from scipy.special import gamma
 
@@ -15,6 +14,8 @@ from luckyao.tomography.slopes import SlopeGeometry, slope_covariance
 from luckyao.units import ARCSEC_RAD
 from luckyao.wfs.beacons import LgsConfig
 from luckyao.wfs.shack_hartmann import ShackHartmann
+
+from reference import layer_reconstructor
 
 TELESCOPE = Telescope(4.2, 1.2)
 WFS = ShackHartmann(TELESCOPE, 8, 532e-9)

@@ -2,7 +2,6 @@
 
 import numpy as np
 import pytest
-from reference import reference_exposure_images
 
 from luckyao.optics.pupil import Telescope
 from luckyao.units import ARCSEC_RAD
@@ -12,6 +11,8 @@ from luckyao.wfs.centroiders import centroids_rad
 from luckyao.wfs.codelets import Codelet, dft, term_value
 from luckyao.wfs.detector import add_noise
 from luckyao.wfs.sensor import measure_slopes
+
+from reference import reference_exposure_images
 
 TELESCOPE = Telescope(4.2, 1.2)
 WAVELENGTH_M = 532e-9

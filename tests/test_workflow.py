@@ -16,28 +16,9 @@ import pytest
 import xarray as xr
 import yaml
 
+from studies import REPO, TINY, snakemake
+
 pytestmark = pytest.mark.workflow  # runs Snakemake, a study or the command line: -m 'not workflow' skips it
-
-REPO = Path(__file__).resolve().parents[1]
-TINY = REPO / "tests" / "data" / "tiny.yaml"
-
-
-def snakemake(workdir: Path, *args):
-    """Snakemake on the repository's workflow in ``workdir``, whose study config is
-    ``workdir/config/config.yaml`` (the workflow's ``configfile:``)."""
-    command = [
-        sys.executable,
-        "-m",
-        "snakemake",
-        "-s",
-        str(REPO / "Snakefile"),
-        "-d",
-        str(workdir),
-        "--cores",
-        "2",
-        *args,
-    ]
-    return subprocess.run(command, capture_output=True, text=True, timeout=600)
 
 
 def write_config(workdir: Path, study: dict | None = None) -> Path:
