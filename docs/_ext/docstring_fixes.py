@@ -5,25 +5,16 @@
   leading dot as "any object whose name ends so", which is ambiguous where two subpackages
   have a module of that name (``wfs.detector`` and ``lucky.detector``). Each is made absolute,
   to the sibling, when that sibling exists.
-* A few docstrings are not valid reStructuredText (``FIXES``): they are mended here, as
-  they are read, until their source is (then the entry goes).
+* The command line's usage block (``luckyao.cli``'s module docstring, which is also its
+  ``--help`` text, so written flush left, as the formatter keeps it) is shown literally.
 """
 
 import importlib
 import re
 
 ROLE = re.compile(r":(mod|class|func|meth|attr|data|exc):`(~?)\.([A-Za-z_][\w.]*)`")
-
-FIXES = {
-    # object name (its end: the module may move) -> [(text, replacement)]
-    "geometry.footprint_coverage": [("``n_samples``^2 points", "``n_samples`` squared points")],
-    "scoring.integrated_images": [
-        ("(criterion, fraction, det, *item)", "(criterion, fraction, det, \\*item)"),
-        ("(det, criterion x bin, *item)", "(det, criterion x bin, \\*item)"),
-    ],
-}
-USAGE = {"cli"}
-"""Module docstrings whose lines after the first paragraph are a usage block (shown literally)."""
+USAGE = "luckyao.cli"
+"""The module whose docstring's lines after its first paragraph are a usage block."""
 
 
 def _exists(path: str) -> bool:
@@ -70,28 +61,13 @@ def absolute_references(app, what, name, obj, options, lines):
     lines[:] = [ROLE.sub(absolute, line) for line in lines]
 
 
-def _matches(name: str, key: str) -> bool:
-    return name == key or name.endswith("." + key)
-
-
-def mend(app, what, name, obj, options, lines):
-    if (
-        what == "module"
-        and any(_matches(name, key) for key in USAGE)
-        and "" in lines
-        and not any(line.rstrip().endswith("::") for line in lines)
-    ):
+def usage_block(app, what, name, obj, options, lines):
+    if what == "module" and name == USAGE and "" in lines:
         blank = lines.index("")
         lines[:] = [*lines[:blank], "", "::", "", *("    " + line if line else "" for line in lines[blank + 1 :])]
-    for key, fixes in FIXES.items():
-        if _matches(name, key):
-            text = "\n".join(lines)
-            for old, new in fixes:
-                text = text.replace(old, new)
-            lines[:] = text.split("\n")
 
 
 def setup(app):
-    app.connect("autodoc-process-docstring", mend, priority=100)  # before numpydoc
+    app.connect("autodoc-process-docstring", usage_block, priority=100)  # before numpydoc
     app.connect("autodoc-process-docstring", absolute_references, priority=100)
     return {"version": "1", "parallel_read_safe": True, "parallel_write_safe": True}

@@ -277,7 +277,8 @@ def cmd_lock(args) -> None:
 def main(argv=None) -> int:
     """Run one subcommand; a failure is one line naming the file or key (no traceback;
     ``LUCKYAO_TRACEBACK=1`` shows it)."""
-    from .jobs.live_run import hold_job_lock, is_study_job
+    from .jobs.live_run import hold_job_lock
+    from .threads import is_study_job
 
     if is_study_job():  # a job of the workflow holds its study's run lock while it lives, first of all
         hold_job_lock()

@@ -82,7 +82,7 @@ def footprint_coverage(
     diameter_m: float, target: LineOfSight, beacons: list[LineOfSight], layer_height_m: float, n_samples: int = 201
 ) -> float:
     """Fraction of the target's pupil footprint on a layer that at least one beacon's
-    footprint covers (discs of diameter ``D (1 - h/H)``, on ``n_samples``^2 points)."""
+    footprint covers (discs of diameter ``D (1 - h/H)``, on ``n_samples`` squared points)."""
     grid = np.linspace(-diameter_m / 2, diameter_m / 2, n_samples)
     gx, gy = np.meshgrid(grid, grid)
     inside = np.hypot(gx, gy) <= diameter_m / 2

@@ -1,4 +1,4 @@
-"""The one-thread environment: the numerical libraries pinned to one thread, as every
+"""The environment of a step: the numerical libraries pinned to one thread, as every
 workflow step runs (the rules' command prefix), ``luckyao.run_case``'s steps, the test
 suite (``tests/conftest.py``) and the benchmarks.
 
@@ -24,6 +24,18 @@ def pin_one_thread(override: bool = True) -> None:
             os.environ[name] = value
         else:
             os.environ.setdefault(name, value)
+
+
+STUDY_JOB = "LUCKYAO_STUDY_JOB"
+"""Environment variable set to ``1`` in the command of every job of the workflow
+(``LUCKYAO`` in ``workflow/rules/common.smk``), whose working folder is then its study
+folder: such a process holds the study's run lock while it lives (``jobs.live_run``) and
+may set a bad input of the study aside (``io.datasets``). Nothing else does either."""
+
+
+def is_study_job() -> bool:
+    """Whether this process is a job of the workflow (:data:`STUDY_JOB`)."""
+    return os.environ.get(STUDY_JOB) == "1"
 
 
 def shell_prefix() -> str:

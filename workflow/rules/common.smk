@@ -6,7 +6,7 @@ import sys
 
 from luckyao.jobs.code_deps import step_sources
 from luckyao.io.datasets import atomic_path
-from luckyao.jobs.live_run import STUDY_JOB, hold_shared
+from luckyao.jobs.live_run import hold_shared
 from luckyao.jobs.resources import (
     StudyTooLarge,
     checked_study,
@@ -38,7 +38,7 @@ from luckyao.studyspec.resolved import imaged_targets
 from luckyao.studyspec.schema import ConfigError
 from luckyao.studyspec.study import drawn_cases, plausibility_warnings, unused_cases
 from luckyao.studyspec.sweeps import sweep_points
-from luckyao.threads import shell_prefix
+from luckyao.threads import STUDY_JOB, shell_prefix
 
 RUN_LOCK = hold_shared()  # this study folder is in use until this Snakemake exits (run.sh cleans up only when free)
 

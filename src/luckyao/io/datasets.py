@@ -29,6 +29,7 @@ import netCDF4
 import numpy as np
 import xarray as xr
 
+from ..threads import is_study_job
 from ..version import __version__
 from .hashing import canonical_json, sha256
 
@@ -93,16 +94,11 @@ def require_finite(values, what: str, variable: str, index_names=()) -> None:
         raise ValueError(f"{what}: variable '{variable}' is not finite at {where}")
 
 
-STUDY_JOB = "LUCKYAO_STUDY_JOB"
-"""Set to ``1`` in the command of every job of the workflow (``live_run.STUDY_JOB``, named
-again here: this module, in every step's code inputs, imports no orchestration)."""
-
-
 def may_set_aside(path) -> bool:
     """Whether ``path`` may be set aside here: only by a job of the workflow, and only a
     file in its study folder's ``results/`` (the working folder's), after links resolved;
     never a file a user handed to a command (``luckyao export README.md``)."""
-    if os.environ.get(STUDY_JOB) != "1":
+    if not is_study_job():
         return False
     results = (Path.cwd() / "results").resolve()
     try:

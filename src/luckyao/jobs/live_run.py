@@ -43,18 +43,6 @@ def hold_shared(folder=".") -> int:
     return fd
 
 
-STUDY_JOB = "LUCKYAO_STUDY_JOB"
-"""Environment variable set to ``1`` in the command of every job of the workflow
-(``LUCKYAO`` in ``workflow/rules/common.smk``), whose working folder is then its study
-folder: such a process holds the study's run lock while it lives (``hold_job_lock``) and
-may set a bad input of the study aside (``datasets.set_aside``). Nothing else does either."""
-
-
-def is_study_job() -> bool:
-    """Whether this process is a job of the workflow (``STUDY_JOB``)."""
-    return os.environ.get(STUDY_JOB) == "1"
-
-
 _JOB_LOCK = None
 
 

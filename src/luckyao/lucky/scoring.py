@@ -54,7 +54,7 @@ class MatchedStrehl:
 
 
 def integrated_images(partial: np.ndarray, n_crit: int, n_bins: int, last_bin: np.ndarray) -> np.ndarray:
-    """Integrated images (criterion, fraction, det, *item) of the (det, criterion x bin, *item)
+    """Integrated images (criterion, fraction, det, \\*item) of the (det, criterion x bin, \\*item)
     partial sums (an item: a whole frame (n, n), or a sub-pixel method's vector,
     :class:`.cropped.CroppedFrames`): fraction ``k``'s is the sum of bins ``0..last_bin[k]``
     (cumulative sums made in place: ``partial`` is overwritten). Contiguous, so the d50's batches
