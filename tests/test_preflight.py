@@ -373,3 +373,30 @@ def test_export_says_it_expected_a_cases_lucky_results(tmp_path, capsys):
         and "expected a case's lucky-imaging results (results/cases/<case>/lucky.nc), got a case's telemetry" in output
     ), output
     assert "n_pixels" not in output and not (tmp_path / "x.fits").exists()
+
+
+def test_without_frame_cubes_a_study_needs_only_its_telemetry_on_disk():
+    """``replay_frames``: no simulation job writes a cube; its file is the telemetry, far
+    smaller (the DM commands and a few values per frame)."""
+    cubes = expand_sweeps(tiny())
+    replayed = dict(cubes, replay_frames=True)
+    cases = validate_study(cubes)
+    sizes = {
+        name: {job: (output, size) for job, _, _, output, size in study_jobs(study, cases) if job.startswith("sim")}
+        for name, study in (("cubes", cubes), ("replayed", replayed))
+    }
+    for job, (output, size) in sizes["replayed"].items():
+        assert output.endswith("/telemetry.nc") and size < sizes["cubes"][job][1] / 5, job
+        assert sizes["cubes"][job][0].endswith("/frames.nc")
+
+
+@pytest.mark.parametrize("what", ["keep_frames", "apodisation"])
+def test_replaying_frames_refuses_a_kept_cube_and_an_apodised_case_by_key(what):
+    study = dict(tiny(), replay_frames=True)
+    if what == "keep_frames":
+        study["keep_frames"], key = True, "config key 'replay_frames'"
+    else:
+        study["cases"]["ltao"]["ao"]["apodisation"] = {"driver": "lgs", "blocked_fraction": 0.1}
+        key = "config key 'cases.ltao.ao.apodisation': an adaptively apodised case cannot be replayed"
+    with pytest.raises(ConfigError, match=key):
+        validate_study(expand_sweeps(study))

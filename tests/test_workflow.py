@@ -411,3 +411,29 @@ def test_registration_methods_along_their_dimension_and_the_knees(finished_run):
     )
     assert result.returncode == 0, result.stderr
     assert "| xcorr |" in result.stdout and "| cog |" in result.stdout
+
+
+def test_without_frame_cubes_every_result_is_the_stored_cubes_bit_for_bit(finished_run, tmp_path):
+    """``replay_frames``: the simulation images nothing and writes no cube; every lucky job makes
+    its frames again from the screens and the recorded DM commands as it reads them (every pass).
+    Every variable of every case's ``lucky.nc`` (each detector, noisy and noiseless, each
+    registration method, the field's replayed targets) and of every figure's dataset equals the
+    stored-cube run's, but ``imaged`` (the targets whose frames the simulation wrote: none here)."""
+    workdir, config = finished_run
+    study = yaml.safe_load(config.read_text())
+    study["replay_frames"] = True
+    write_config(tmp_path, study)
+    result = snakemake(tmp_path)
+    assert result.returncode == 0, result.stderr[-3000:]
+    assert "frames.nc" not in result.stdout + result.stderr  # no job ever plans a cube
+    stored_cases = sorted((workdir / "results" / "cases").glob("*/lucky.nc"))
+    assert len(stored_cases) >= 7
+    for stored in stored_cases + sorted((workdir / "figures").glob("*.nc")):
+        replayed = tmp_path / stored.relative_to(workdir)
+        with xr.open_dataset(stored) as a, xr.open_dataset(replayed) as b:
+            assert set(a.variables) == set(b.variables), stored
+            for name in set(a.variables) - {"imaged"}:
+                np.testing.assert_array_equal(a[name].values, b[name].values, err_msg=f"{stored}: {name}")
+    for telemetry in (tmp_path / "results" / "cases").glob("*/telemetry.nc"):
+        with xr.open_dataset(telemetry) as ds:
+            assert not ds.imaged.values.any(), telemetry  # the simulation imaged nothing

@@ -96,22 +96,27 @@ def cmd_simulate(args) -> None:
         products = open_dataset(args.commands, "AO command", allow_nan=())
         commands = products["command_matrix"].values, products["dm_slopes"].values
     attrs = provenance(f"luckyao frames of case {args.name}", config, args.seed)
-    imaged = imaged_targets(config)
+    # without a frames file (replay_frames) no target is imaged: the lucky job makes the frames again
+    imaged = imaged_targets(config) if args.frames else []
+    loop = TimeLoop(
+        case,
+        screens,
+        args.seed,
+        reconstructors=reconstructors,
+        calibration=calibration,
+        slopes=slopes,
+        commands=commands,
+        lgs_rms_nm=lgs_rms_nm,
+        imaged_targets=imaged,
+    )
     start = time.perf_counter()
-    with FrameWriter(
-        args.frames, imaged, case.n_frames, case.camera.n_pixels, case.camera.pixel_scale_arcsec, attrs
-    ) as writer:
-        telemetry = TimeLoop(
-            case,
-            screens,
-            args.seed,
-            reconstructors=reconstructors,
-            calibration=calibration,
-            slopes=slopes,
-            commands=commands,
-            lgs_rms_nm=lgs_rms_nm,
-            imaged_targets=imaged,
-        ).run(writer.write)
+    if args.frames:
+        with FrameWriter(
+            args.frames, imaged, case.n_frames, case.camera.n_pixels, case.camera.pixel_scale_arcsec, attrs
+        ) as writer:
+            telemetry = loop.run(writer.write)
+    else:
+        telemetry = loop.run(lambda start, frames: None)
     elapsed = time.perf_counter() - start
     steps = case.clock.n_steps
     logging.getLogger(__name__).info(
@@ -339,7 +344,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="telemetry of the AO case that measured this no-AO case's LGS rms (studyspec.products.lgs_twin)",
     )
     p.add_argument("--slopes", default="", help="LGS slopes product (cases with AO, config.slopes_spec)")
-    p.add_argument("--frames", required=True)
+    p.add_argument("--frames", default="", help="frame cube to write (none: no target imaged, replay_frames)")
     p.add_argument("--telemetry", required=True)
     p.set_defaults(func=cmd_simulate)
 
@@ -368,7 +373,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("lucky", help="detector noise, selection, shift-and-add, scores")
     p.add_argument("--settings", required=True, help="lucky settings as JSON")
-    p.add_argument("--frames", required=True)
+    p.add_argument("--frames", default="", help="frame cube (none: every target replayed, replay_frames)")
     p.add_argument("--telemetry", required=True)
     p.add_argument("--out", required=True)
     p.add_argument("--screens", default="", help="screens, to replay the targets the simulation did not image")

@@ -113,8 +113,16 @@ def slopes_file(case):
     return f"results/slopes/{slopes_key(spec)}.nc" if spec else []
 
 
+REPLAY_FRAMES = STUDY.get("replay_frames", False)
+"""No frame cube: the simulation images nothing and the lucky job replays every target."""
+
+
 def frames_output(path):
-    return path if STUDY.get("keep_frames", False) else temp(path)
+    """The simulation's frame cube as its output named ``frames`` (kept, or temporary), or none
+    with ``replay_frames``."""
+    if REPLAY_FRAMES:
+        return {}
+    return {"frames": path if STUDY.get("keep_frames", False) else temp(path)}
 
 
 wildcard_constraints:
@@ -261,8 +269,8 @@ def lucky_mem_mb(case):
 
 def replay_screens(case):
     """The screens (and metadata) when the case's lucky job replays targets its simulation
-    did not image (a field with a reference star), else none."""
-    if len(imaged_targets(CASES[case])) == len(CASES[case]["targets_arcsec"]):
+    did not image (a field with a reference star; every case with replay_frames), else none."""
+    if not REPLAY_FRAMES and len(imaged_targets(CASES[case])) == len(CASES[case]["targets_arcsec"]):
         return []
     key = turbulence_key(TURBULENCE[case])
     return [f"results/turbulence/{key}.npy", f"results/turbulence/{key}.nc"]

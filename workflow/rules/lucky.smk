@@ -1,7 +1,7 @@
 rule lucky:
     """Detector noise, frame selection, shift-and-add and scores for one case."""
     input:
-        frames="results/cases/{case}/frames.nc",
+        frames=lambda w: [] if REPLAY_FRAMES else f"results/cases/{w.case}/frames.nc",
         telemetry="results/cases/{case}/telemetry.nc",
         replay=lambda w: replay_screens(w.case),
         code=step_sources("luckyao.steps.postprocess"),
@@ -18,9 +18,10 @@ rule lucky:
         runtime=30,  # minutes; paper fidelity: up to 15 measured
     params:
         settings=lambda w: canonical_json(lucky_settings(STUDY, CASES, w.case)),
+        frames=lambda w, input: ["--frames", input.frames] if input.frames else [],
         replay=lambda w, input: (
             ["--screens", input.replay[0], "--screens-metadata", input.replay[1]] if input.replay else []
         ),
     shell:
-        "{LUCKYAO} lucky --settings {params.settings:q} --frames {input.frames:q}"
+        "{LUCKYAO} lucky --settings {params.settings:q} {params.frames:q}"
         " --telemetry {input.telemetry:q} --out {output:q} {params.replay:q} 2> {log:q}"

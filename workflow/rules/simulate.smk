@@ -44,7 +44,7 @@ rule simulate:
         lgs_twin=lambda w: ancient(f"results/cases/{LGS_TWIN[w.case]}/telemetry.nc") if LGS_TWIN[w.case] else [],
         code=step_sources("luckyao.steps.simulation"),
     output:
-        frames=frames_output("results/cases/{case}/frames.nc"),
+        **frames_output("results/cases/{case}/frames.nc"),  # none with replay_frames
         telemetry="results/cases/{case}/telemetry.nc",
     log:
         "logs/simulate/{case}.log",
@@ -66,7 +66,8 @@ rule simulate:
             + (["--slopes", input.slopes] if input.slopes else [])
             + (["--lgs-telemetry", input.lgs_twin] if input.lgs_twin else [])
         ),
+        frames=lambda w, output: ["--frames", output.frames] if "frames" in output.keys() else [],
     shell:
         "{LUCKYAO} simulate --case {params.case:q} --name {wildcards.case:q} --seed {params.seed}"
         " --screens {input.screens:q} --screens-metadata {input.screens_metadata:q}"
-        " {params.products:q} --frames {output.frames:q} --telemetry {output.telemetry:q} 2> {log:q}"
+        " {params.products:q} {params.frames:q} --telemetry {output.telemetry:q} 2> {log:q}"

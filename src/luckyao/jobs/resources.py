@@ -129,6 +129,15 @@ def frames_bytes(case: dict) -> float:
     return 4.0 * len(imaged_targets(case)) * frame_count(case) * case["camera"]["n_pixels"] ** 2
 
 
+def telemetry_bytes(case: dict) -> float:
+    """A case's telemetry file: with AO every WFS exposure's DM commands (float32), and a few
+    float32 values per target and frame."""
+    commands = 0.0
+    if (spec := commands_spec(case)) is not None:
+        commands = 4.0 * spec["ao"]["n_actuators"] ** 2 * FrameClock.from_config(case).n_exposures
+    return commands + 4.0 * 8 * len(case["targets_arcsec"]) * frame_count(case)
+
+
 def simulate_memory_bytes(case: dict) -> float:
     """A simulation: its measured own memory, the matrices and slopes it loads, a block of frames."""
     matrices = 0.0
@@ -151,10 +160,13 @@ def lucky_memory_bytes(settings: dict) -> float:
     """A case's post-processing (``studyspec.lucky.lucky_settings``): 1.5 GB and, per detector and
     registration method (their sums all held at once: the methods share the passes over the
     frames), 0.21 GB of partial sums of whole frames for a 256-pixel camera (``cog``), or
-    :data:`SUBPIXEL_SUMS_FRACTION` of that for a sub-pixel method."""
-    pixels = (settings["case_config"]["camera"]["n_pixels"] / 256) ** 2
+    :data:`SUBPIXEL_SUMS_FRACTION` of that for a sub-pixel method; replaying the frames
+    (``replay_frames``), the simulation's memory besides (its block of frames, the DM commands)."""
+    case = settings["case_config"]
+    pixels = (case["camera"]["n_pixels"] / 256) ** 2
     methods = sum(1.0 if name == "cog" else SUBPIXEL_SUMS_FRACTION for name in registrations(settings))
-    return 1.5e9 + 0.21e9 * pixels * len(settings["detectors"]) * methods
+    replay = simulate_memory_bytes(case) if settings.get("replay_frames", False) else 0.0
+    return 1.5e9 + 0.21e9 * pixels * len(settings["detectors"]) * methods + replay
 
 
 def mem_mb(estimate_bytes: float, measured_mb: int = 0, margin: float = MARGIN) -> int:
@@ -198,9 +210,11 @@ def study_jobs(study: dict, cases: dict) -> list[tuple[str, str, float, str | No
         if (spec := slopes_spec(study, case)) is not None:
             key = slopes_key(spec)
             add(f"slopes {key}", name, slopes_memory_bytes(case), f"results/slopes/{key}.nc", slopes_bytes(case))
-        add(
-            f"simulate {name}", name, simulate_memory_bytes(case), f"results/cases/{name}/frames.nc", frames_bytes(case)
-        )
+        if study.get("replay_frames", False):  # no cube: the telemetry is the simulation's file
+            output, size = f"results/cases/{name}/telemetry.nc", telemetry_bytes(case)
+        else:
+            output, size = f"results/cases/{name}/frames.nc", frames_bytes(case)
+        add(f"simulate {name}", name, simulate_memory_bytes(case), output, size)
         add(f"lucky {name}", name, lucky_memory_bytes(lucky_settings(study, cases, name)), None, 0.0)
     return [(job, *values) for job, values in jobs.items()]
 
@@ -214,7 +228,7 @@ FILE_KINDS = {
     "reconstructor": "reconstructors",
     "commands": "command matrices",
     "slopes": "LGS slopes",
-    "simulate": "frame cubes",
+    "simulate": "frame cubes (telemetry with replay_frames)",
 }
 
 
@@ -239,7 +253,7 @@ def preflight(
         if output is not None and not (Path(folder) / output).exists():
             pending.append((job, case, output, size))
     keep_frames = study.get("keep_frames", False)
-    kept = [p for p in pending if keep_frames or not p[0].startswith("simulate ")]
+    kept = [p for p in pending if keep_frames or study.get("replay_frames", False) or not p[0].startswith("simulate ")]
     passing = sorted((p for p in pending if p not in kept), key=lambda p: p[3], reverse=True)[: max(1, parallel_jobs)]
     needed = sum(p[3] for p in kept + passing)
     if needed > free_bytes:

@@ -68,11 +68,14 @@ def lucky_settings(study: dict, cases: dict, case_name: str) -> dict:
     """The post-processing settings one case's lucky job uses, with its resolved config:
     every listed detector, and the detector sweep and every registration method when a
     ``quality_vs_signal`` or ``registration`` figure shows the case (their cost goes only where
-    they are drawn; elsewhere ``cog`` alone)."""
+    they are drawn; elsewhere ``cog`` alone); with ``replay_frames``, the flag that every
+    target's frames are made again from the screens (no cube)."""
     lucky = {key: value for key, value in study["lucky"].items() if key not in ("detector_sweep", "registration")}
     lucky["error_blocks"] = error_blocks(study["lucky"])
     lucky["registration"] = ["cog"]
     if any(f["kind"] in SIGNAL_KINDS and case_name in f["cases"] for f in study["figures"].values()):
         lucky["detectors"] = {**lucky["detectors"], **sweep_detectors(study["lucky"])}
         lucky["registration"] = registrations(study["lucky"])
+    if study.get("replay_frames", False):  # only when set: the settings (and their hash) of a stored cube unchanged
+        lucky["replay_frames"] = True
     return {"seed": study["seed"], "case": case_name, "case_config": cases[case_name], **lucky}

@@ -31,6 +31,7 @@ class LuckySettings:
     detectors: tuple[Detector, ...]
     error_blocks: int
     imaged_targets: tuple[int, ...]
+    """The targets whose frames the simulation stored (none with ``replay_frames``: each is replayed)."""
     reference_target: int | None
     image_crop_px: int | None
     """Pixels across the integrated images kept (None: the whole frame)."""
@@ -62,7 +63,7 @@ class LuckySettings:
                 for name, d in settings["detectors"].items()
             ),
             error_blocks=error_blocks(settings),
-            imaged_targets=tuple(imaged_targets(case)),
+            imaged_targets=() if settings.get("replay_frames", False) else tuple(imaged_targets(case)),
             reference_target=case.get("reference_target"),
             image_crop_px=image_crop_px(settings),
             registrations=tuple(registrations(settings)),

@@ -111,6 +111,7 @@ def validate_study(config: dict, schema: dict | None = None) -> dict:
             problems.append(str(err))
             continue
         cases[name] = resolved
+    problems += _replay_problems(config, cases)
     for fig_id, figure in config["figures"].items():
         try:
             _check_figure(fig_id, figure, cases, config)
@@ -119,6 +120,21 @@ def validate_study(config: dict, schema: dict | None = None) -> dict:
     if problems:
         raise ConfigError("\n".join(problems))
     return cases
+
+
+def _replay_problems(config: dict, cases: dict) -> list[str]:
+    """``replay_frames`` keeps no cube, and cannot replay an adaptively apodised case
+    (:class:`luckyao.steps.simulation.Replay`)."""
+    if not config.get("replay_frames", False):
+        return []
+    if config.get("keep_frames", False):
+        return ["config key 'replay_frames': with keep_frames: true there is a cube to read; set one of them false"]
+    return [
+        f"config key 'cases.{name}.ao.apodisation': an adaptively apodised case cannot be replayed "
+        "(replay_frames: true): image it in the simulation (replay_frames: false)"
+        for name, case in cases.items()
+        if case["ao"].get("apodisation") is not None
+    ]
 
 
 def _check_detectors(lucky: dict) -> None:
