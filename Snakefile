@@ -10,18 +10,24 @@
 import os
 import sys
 
+from luckyao.studyspec.overrides import typed as _typed
 from luckyao.studyspec.schema import ConfigError as _ConfigError
+from luckyao.studyspec.schema import deep_merge as _deep_merge
 from luckyao.studyspec.yamlfile import read_config_file as _read_config_file
 
 try:
-    for _path in ["config/config.yaml", *workflow.overwrite_configfiles]:
-        if os.path.exists(_path):
-            _read_config_file(_path)
+    OVERLAYS = [_read_config_file(_path) for _path in workflow.overwrite_configfiles if os.path.exists(_path)]
+    if os.path.exists("config/config.yaml"):
+        _read_config_file("config/config.yaml")
 except _ConfigError as _err:
     sys.exit(f"luckyao: invalid study config: {_err}")
 
 
 configfile: "config/config.yaml"
+
+
+# --config values typed as YAML types them (Snakemake gives nested ones as strings: '0.5')
+config.update(_deep_merge(config, _typed(dict(workflow.config_settings.config))))
 
 
 report: "workflow/report/workflow.rst"
@@ -36,10 +42,14 @@ include: "workflow/rules/lucky.smk"
 include: "workflow/rules/figures.smk"
 
 
+# The default target: every figure, and the FITS images of the cases they draw; or, when the
+# overlays (--configfile, --config) only add cases, those cases alone (studyspec.overrides).
 rule all:
     default_target: True
     input:
-        expand("figures/{fig}.{ext}", fig=list(STUDY["figures"]), ext=["pdf", "png", "html", "nc"]),
-        expand("fits/{case}.fits", case=DRAWN_CASES),
-        # what the drawn cases keep, so that one set aside or deleted is remade (kept_files)
-        sorted({path for case in DRAWN_CASES for path in kept_files(case)}),
+        []
+        if ADDED_CASES
+        else expand("figures/{fig}.{ext}", fig=list(STUDY["figures"]), ext=["pdf", "png", "html", "nc"]),
+        expand("fits/{case}.fits", case=ADDED_CASES or DRAWN_CASES),
+        # what the cases keep, so that one set aside or deleted is remade (kept_files)
+        sorted({path for case in ADDED_CASES or DRAWN_CASES for path in kept_files(case)}),

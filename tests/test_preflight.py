@@ -21,6 +21,7 @@ from luckyao.studyspec.lucky import sweep_detectors
 from luckyao.studyspec.schema import ConfigError
 from luckyao.studyspec.study import validate_study
 from luckyao.studyspec.sweeps import expand_sweeps
+from luckyao.studyspec.view import resolve_study
 
 from studies import REPO, TINY, snakemake, tiny, with_name, with_sweep
 
@@ -303,39 +304,39 @@ def test_the_files_of_a_study_are_summed_against_the_free_disk(tmp_path, monkeyp
     paper run with keep_frames, ~130 GB, was accepted with 40 GB free)."""
     study = expand_sweeps(dict(tiny(), keep_frames=True))
     cases = validate_study(study)
-    sizes = [size for _, _, _, output, size in study_jobs(study, cases) if output is not None]
+    sizes = [size for _, _, _, output, size in study_jobs(resolve_study(study, cases)) if output is not None]
     free_disk(monkeypatch, max(sizes) * 1.01)
     assert sum(sizes) > max(sizes) * 1.01
-    problems = preflight(study, cases, tmp_path, memory_bytes=1e15)
+    problems = preflight(resolve_study(study, cases), tmp_path, memory_bytes=1e15)
     assert len(problems) == 1 and problems[0].startswith(
         "config key 'keep_frames': the study's files not yet made need about"
     ), problems
     assert "every frame cube kept" in problems[0]
     free_disk(monkeypatch, sum(sizes) * 1.01)
-    assert preflight(study, cases, tmp_path, memory_bytes=1e15) == []
+    assert preflight(resolve_study(study, cases), tmp_path, memory_bytes=1e15) == []
 
 
 def test_frame_cubes_deleted_once_post_processed_count_as_many_as_run_at_once(tmp_path, monkeypatch):
     study = expand_sweeps(tiny())
     cases = validate_study(study)
-    jobs = [(job, size) for job, _, _, output, size in study_jobs(study, cases) if output is not None]
+    jobs = [(job, size) for job, _, _, output, size in study_jobs(resolve_study(study, cases)) if output is not None]
     lasting = sum(size for job, size in jobs if not job.startswith("simulate "))
     frames = sorted((size for job, size in jobs if job.startswith("simulate ")), reverse=True)
     free_disk(monkeypatch, lasting + frames[0] + frames[1] / 2)
-    assert preflight(study, cases, tmp_path, memory_bytes=1e15, parallel_jobs=1) == []
-    problems = preflight(study, cases, tmp_path, memory_bytes=1e15, parallel_jobs=2)
+    assert preflight(resolve_study(study, cases), tmp_path, memory_bytes=1e15, parallel_jobs=1) == []
+    problems = preflight(resolve_study(study, cases), tmp_path, memory_bytes=1e15, parallel_jobs=2)
     assert len(problems) == 1 and "the 2 largest frame cubes at once" in problems[0]
 
 
 def test_a_file_already_made_needs_no_disk(tmp_path, monkeypatch):
     study = expand_sweeps(dict(tiny(), keep_frames=True))
     cases = validate_study(study)
-    for _, _, _, output, _ in study_jobs(study, cases):
+    for _, _, _, output, _ in study_jobs(resolve_study(study, cases)):
         if output is not None:
             (tmp_path / output).parent.mkdir(parents=True, exist_ok=True)
             (tmp_path / output).touch()
     free_disk(monkeypatch, 0.0)
-    assert preflight(study, cases, tmp_path, memory_bytes=1e15) == []
+    assert preflight(resolve_study(study, cases), tmp_path, memory_bytes=1e15) == []
 
 
 # --- draw and export say what they expected (item 10) ---------------------------------------------
@@ -382,7 +383,11 @@ def test_without_frame_cubes_a_study_needs_only_its_telemetry_on_disk():
     replayed = dict(cubes, replay_frames=True)
     cases = validate_study(cubes)
     sizes = {
-        name: {job: (output, size) for job, _, _, output, size in study_jobs(study, cases) if job.startswith("sim")}
+        name: {
+            job: (output, size)
+            for job, _, _, output, size in study_jobs(resolve_study(study, cases))
+            if job.startswith("sim")
+        }
         for name, study in (("cubes", cubes), ("replayed", replayed))
     }
     for job, (output, size) in sizes["replayed"].items():

@@ -100,24 +100,14 @@ def run_case(study: dict, case, name: str = "explore", workdir=None) -> xr.Datas
     """Run one case of ``study`` (a study config as :func:`load_study` gives) and return its
     lucky-imaging results (as :func:`open_case`). ``case`` is the name of one of the
     study's cases, or a dict of overrides of its ``base`` (then called ``name``). The files
-    go to ``workdir`` (kept), by default to a temporary folder removed afterwards. Keep
-    ``turbulence.duration_s`` short for exploration: the screens are made for all of it.
+    go to ``workdir`` (kept), by default to a temporary folder removed afterwards. The screens
+    are as long as the case (unless the study pins ``turbulence.duration_s``).
     Each step runs in a process of its own, on one thread, as the workflow's: the time loop
     is the ``simulate`` step's, :class:`luckyao.steps.simulation.TimeLoop` (its LGS
     chain measured in the loop: the numbers of the workflow's replayed slopes and LGS twins,
     ``tests/test_ao_loop.py``)."""
     from .io.hashing import canonical_json
-    from .studyspec.lucky import lucky_settings
-    from .studyspec.products import (
-        calibration_key,
-        calibration_spec,
-        commands_key,
-        commands_spec,
-        reconstructor_key,
-        reconstructor_spec,
-        turbulence_key,
-        turbulence_spec,
-    )
+    from .studyspec.view import resolve_study
 
     study = copy.deepcopy(study)
     if isinstance(case, dict):
@@ -139,34 +129,31 @@ def run_case(study: dict, case, name: str = "explore", workdir=None) -> xr.Datas
         "cases": {name: study["cases"][name]},
         "figures": signal,
     }
-    cases = validate_study(study)
-    resolved = cases[name]
+    view = resolve_study(study, validate_study(study))
+    resolved = view.cases[name].config
     scratch = workdir is None
     root = Path(tempfile.mkdtemp(prefix="luckyao-") if scratch else workdir)
     root.mkdir(parents=True, exist_ok=True)
     try:
-        turbulence = turbulence_spec(study, resolved)
-        screens = root / f"{turbulence_key(turbulence)}.npy"
+        turbulence = view.cases[name].screens
+        screens = root / f"{turbulence.key}.npy"
         metadata = screens.with_suffix(".nc")
         if not metadata.exists():
             _step(
                 "turbulence",
                 "--spec",
-                canonical_json(turbulence),
+                canonical_json(turbulence.spec),
                 "--screens",
                 str(screens),
                 "--metadata",
                 str(metadata),
             )
         products = []
-        for spec, key, step in (
-            (reconstructor_spec(resolved), reconstructor_key, "reconstructor"),
-            (commands_spec(resolved), commands_key, "commands"),
-            (calibration_spec(study, resolved), calibration_key, "calibration"),
-        ):
-            path = root / f"{key(spec)}.nc" if spec is not None else None
+        for step in ("reconstructor", "commands", "calibration"):
+            product = getattr(view.cases[name], step)
+            path = root / f"{product.key}.nc" if product is not None else None
             if path is not None and not path.exists():
-                _step(step, "--spec", canonical_json(spec), "--out", str(path))
+                _step(step, "--spec", canonical_json(product.spec), "--out", str(path))
             products += [f"--{step}", str(path) if path else ""]
         frames, telemetry, lucky = (root / name / f for f in ("frames.nc", "telemetry.nc", "lucky.nc"))
         frames.parent.mkdir(exist_ok=True)
@@ -191,7 +178,7 @@ def run_case(study: dict, case, name: str = "explore", workdir=None) -> xr.Datas
         _step(
             "lucky",
             "--settings",
-            canonical_json(lucky_settings(study, cases, name)),
+            canonical_json(view.cases[name].lucky_settings),
             "--frames",
             str(frames),
             "--telemetry",

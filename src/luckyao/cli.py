@@ -1,6 +1,7 @@
 """Command-line interface: one subcommand per workflow step.
 
-luckyao check CONFIG [OVERLAY ...] [--study-dir DIR] [--mem-mb N]
+luckyao check CONFIG [OVERLAY ...] [case=NAME] [key.path=value ...] [--study-dir DIR] [--mem-mb N]
+luckyao show CASE [key.path=value ...] [--configfile OVERLAY ...] [--json]
 luckyao turbulence --spec JSON --screens S.npy --metadata S.nc
 luckyao simulate --case JSON --name NAME --seed N --screens S.npy --screens-metadata S.nc
                  [--reconstructor R.nc] [--commands C.nc] [--calibration W.nc] [--lgs-telemetry T.nc]
@@ -36,24 +37,62 @@ def cmd_check(args) -> int:
     own pre-flight (``jobs.resources.checked_study``), so what its dry run refuses is refused
     here, for the study folder ``--study-dir``."""
     from .jobs.resources import StudyTooLarge, checked_study, machine_memory_bytes
+    from .studyspec.overrides import is_override, split_words
     from .studyspec.schema import ConfigError
-    from .studyspec.study import plausibility_warnings, read_study, unused_cases
+    from .studyspec.study import plausibility_warnings
 
-    files = " + ".join(args.config)
+    paths = [word for word in args.config if not is_override(word)]
+    case, overrides, _ = split_words([word for word in args.config if is_override(word)])
+    files = " + ".join(paths + overrides + ([f"case={case}"] if case else []))
     memory = max(machine_memory_bytes(), 1e6 * (args.mem_mb or 0))
     try:
-        study, cases = checked_study(read_study(*args.config), args.study_dir, memory)
+        view = checked_study(_study_with(paths, overrides, case), args.study_dir, memory)
     except ConfigError as err:
         what = "study too large" if isinstance(err, StudyTooLarge) else "invalid"
         for problem in str(err).splitlines():
             print(f"{files}: {what}: {problem}", file=sys.stderr)
         return 1
-    for warning in plausibility_warnings(cases):
+    for warning in plausibility_warnings(view.configs):
         print(f"{files}: warning: {warning}", file=sys.stderr)
-    unused = unused_cases(study)
-    if unused:
-        print(f"{files}: warning: no figure shows the cases {', '.join(unused)}", file=sys.stderr)
-    print(f"{files}: valid, {len(cases)} cases")
+    if view.unused:
+        print(f"{files}: warning: no figure shows the cases {', '.join(view.unused)}", file=sys.stderr)
+    print(f"{files}: valid, {len(view.cases)} cases")
+    return 0
+
+
+def _study_with(paths: list[str], overrides: list[str], case: str | None) -> dict:
+    """The study of config files merged in order, with ``key=value`` overrides (``studyspec.overrides``)."""
+    from .studyspec.overrides import parse_overrides
+    from .studyspec.schema import deep_merge
+    from .studyspec.study import read_study
+
+    config = read_study(*paths)
+    return deep_merge(config, parse_overrides(overrides, case)) if overrides or case else config
+
+
+def cmd_show(args) -> int:
+    """The fully resolved case: every key, what was derived, the products, the estimates."""
+    from .jobs.resources import StudyTooLarge, checked_study, machine_memory_bytes
+    from .jobs.show import case_report, case_text
+    from .studyspec.schema import ConfigError
+
+    paths = ["config/config.yaml", *args.configfile]
+    try:
+        view = checked_study(_study_with(paths, args.overrides, args.case), args.study_dir, machine_memory_bytes())
+    except StudyTooLarge as err:
+        print(f"luckyao show: warning: {err}", file=sys.stderr)
+        from .studyspec.study import validate_study
+        from .studyspec.sweeps import expand_sweeps
+        from .studyspec.view import resolve_study
+
+        study = expand_sweeps(_study_with(paths, args.overrides, args.case))
+        view = resolve_study(study, validate_study(study))
+    except ConfigError as err:
+        for problem in str(err).splitlines():
+            print(f"luckyao show: invalid: {problem}", file=sys.stderr)
+        return 1
+    report = case_report(view, args.case)
+    print(json.dumps(report, indent=1) if args.json else case_text(report))
     return 0
 
 
@@ -312,7 +351,11 @@ def build_parser() -> argparse.ArgumentParser:
         help="validate a study config (later files are merged over earlier ones) and check "
         "that its jobs fit this machine, as the workflow does before any job",
     )
-    p.add_argument("config", nargs="+")
+    p.add_argument(
+        "config",
+        nargs="+",
+        help="config files (later merged over earlier), then case=NAME and key.path=value overrides",
+    )
     p.add_argument("--study-dir", default=".", help="the study folder whose free disk is checked (default: here)")
     p.add_argument(
         "--mem-mb",
@@ -321,6 +364,18 @@ def build_parser() -> argparse.ArgumentParser:
         "(as Snakemake's --resources mem_mb=N)",
     )
     p.set_defaults(func=cmd_check)
+
+    p = sub.add_parser(
+        "show",
+        help="print a case fully resolved: every key (the derived ones named), the tomography prior, "
+        "the screens, the products and the jobs' estimated memory and disk",
+    )
+    p.add_argument("case", help="a case of the study, or a new one (an override of base)")
+    p.add_argument("overrides", nargs="*", help="key.path=value overrides (a case's key: of this case)")
+    p.add_argument("--configfile", nargs="+", default=[], help="overlays merged over config/config.yaml")
+    p.add_argument("--study-dir", default=".", help="the study folder whose free disk is checked (default: here)")
+    p.add_argument("--json", action="store_true", help="JSON for machines instead of text")
+    p.set_defaults(func=cmd_show)
 
     p = sub.add_parser("turbulence", help="generate the shared normalised phase screens")
     p.add_argument("--spec", required=True, help="turbulence spec as JSON")

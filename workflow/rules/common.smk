@@ -20,23 +20,11 @@ from luckyao.jobs.resources import (
     turbulence_memory_bytes,
 )
 from luckyao.io.hashing import canonical_json, sha256
-from luckyao.studyspec.lucky import SIGNAL_KINDS, lucky_settings, sweep_detectors
-from luckyao.studyspec.products import (
-    calibration_key,
-    calibration_spec,
-    commands_key,
-    commands_spec,
-    lgs_twin,
-    reconstructor_key,
-    reconstructor_spec,
-    slopes_key,
-    slopes_spec,
-    turbulence_key,
-    turbulence_spec,
-)
+from luckyao.studyspec.lucky import SIGNAL_KINDS, sweep_detectors
+from luckyao.studyspec.overrides import added_cases, typed
 from luckyao.studyspec.resolved import imaged_targets
 from luckyao.studyspec.schema import ConfigError
-from luckyao.studyspec.study import drawn_cases, plausibility_warnings, unused_cases
+from luckyao.studyspec.study import plausibility_warnings
 from luckyao.studyspec.sweeps import sweep_points
 from luckyao.threads import STUDY_JOB, shell_prefix
 
@@ -49,40 +37,43 @@ RUN_LOCK = hold_shared()  # this study folder is in use until this Snakemake exi
 GIVEN_MEM_MB = getattr(workflow.global_resources.get("mem_mb"), "value", None)  # a snakemake Resource
 MEMORY_LIMIT_BYTES = max(machine_memory_bytes(), 1e6 * GIVEN_MEM_MB if isinstance(GIVEN_MEM_MB, (int, float)) else 0)
 try:
-    STUDY, CASES = checked_study(
-        config, ".", MEMORY_LIMIT_BYTES, workflow.cores if isinstance(workflow.cores, int) else None
-    )
+    VIEW = checked_study(config, ".", MEMORY_LIMIT_BYTES, workflow.cores if isinstance(workflow.cores, int) else None)
 except ConfigError as err:
     what = "study too large" if isinstance(err, StudyTooLarge) else "invalid study config"
     sys.exit("\n".join(f"luckyao: {what}: {problem}" for problem in str(err).splitlines()))
+STUDY, CASES = VIEW.config, VIEW.configs  # the study (sweeps expanded); {case: resolved config}
 for warning in plausibility_warnings(CASES):
     print(f"luckyao: warning: {warning}", file=sys.stderr)
-if unused_cases(STUDY):
+ADDED_CASES = added_cases(STUDY, [*OVERLAYS, typed(dict(workflow.config_settings.config))])
+"""The cases overlays add without a figure (studyspec.overrides.added_cases): `all` runs these alone."""
+if VIEW.unused and not ADDED_CASES:
     # warned, not run: a case no figure shows would cost its simulation (minutes to an hour at
     # paper fidelity) for nothing drawn; `snakemake all_cases` runs every case on purpose
     print(
-        f"luckyao: warning: no figure shows the cases {', '.join(unused_cases(STUDY))}: they are not run "
-        "(`all_cases` runs every case)",
+        f"luckyao: warning: no figure shows the cases {', '.join(VIEW.unused)}: they are not run "
+        "(`all_cases` runs every case; `bash run.sh study case=NAME` one)",
         file=sys.stderr,
     )
 
-TURBULENCE = {name: turbulence_spec(STUDY, case) for name, case in CASES.items()}
-TURBULENCE_BY_KEY = {turbulence_key(spec): spec for spec in TURBULENCE.values()}
-RECONSTRUCTOR = {name: reconstructor_spec(case) for name, case in CASES.items()}
-RECONSTRUCTOR_BY_KEY = {reconstructor_key(s): s for s in RECONSTRUCTOR.values() if s is not None}
-COMMANDS = {name: commands_spec(case) for name, case in CASES.items()}
-COMMANDS_BY_KEY = {commands_key(s): s for s in COMMANDS.values() if s is not None}
-CALIBRATION = {name: calibration_spec(STUDY, case) for name, case in CASES.items()}
-CALIBRATION_BY_KEY = {calibration_key(s): s for s in CALIBRATION.values() if s is not None}
-LGS_TWIN = {name: lgs_twin(STUDY, CASES, name) for name in CASES}
-SLOPES = {name: slopes_spec(STUDY, case) for name, case in CASES.items()}
-SLOPES_BY_KEY = {slopes_key(s): s for s in SLOPES.values() if s is not None}
+
+def _products(kind):
+    """``{case: product or None}`` and ``{key: spec}`` of a product kind of the resolved view."""
+    of_case = {name: getattr(case, kind) for name, case in VIEW.cases.items()}
+    return of_case, {p.key: p.spec for p in of_case.values() if p is not None}
+
+
+TURBULENCE, TURBULENCE_BY_KEY = _products("screens")
+RECONSTRUCTOR, RECONSTRUCTOR_BY_KEY = _products("reconstructor")
+COMMANDS, COMMANDS_BY_KEY = _products("commands")
+CALIBRATION, CALIBRATION_BY_KEY = _products("calibration")
+SLOPES, SLOPES_BY_KEY = _products("slopes")
+LGS_TWIN = {name: case.lgs_twin for name, case in VIEW.cases.items()}
 SLOPES_CASES = {}
 """The AO cases whose simulations replay each LGS slopes product, by its key (the first one's
 calibration and memory estimate serve the product: they share its LGS chain)."""
-for _name, _spec in SLOPES.items():
-    if _spec is not None:
-        SLOPES_CASES.setdefault(slopes_key(_spec), []).append(_name)
+for _name, _product in SLOPES.items():
+    if _product is not None:
+        SLOPES_CASES.setdefault(_product.key, []).append(_name)
 # every job on one thread (src/luckyao/threads.py) and marked as a job of the workflow
 # (STUDY_JOB: it holds the study's run lock while it lives and may set a bad input of the
 # study aside); every value formatted into a command is quoted (:q)
@@ -91,26 +82,26 @@ LUCKYAO = f"{STUDY_JOB}=1 {shell_prefix()}{shlex.quote(sys.executable)} -m lucky
 
 def reconstructor_file(case):
     """The case's cached reconstructor file, or [] without LGS."""
-    spec = RECONSTRUCTOR[case]
-    return f"results/reconstructors/{reconstructor_key(spec)}.nc" if spec else []
+    product = RECONSTRUCTOR[case]
+    return product.path if product else []
 
 
 def commands_file(case):
     """The case's cached AO command-matrix file, or [] without AO."""
-    spec = COMMANDS[case]
-    return f"results/commands/{commands_key(spec)}.nc" if spec else []
+    product = COMMANDS[case]
+    return product.path if product else []
 
 
 def calibration_file(case):
     """The case's cached WFS calibration file, or [] without one."""
-    spec = CALIBRATION[case]
-    return f"results/calibrations/{calibration_key(spec)}.nc" if spec else []
+    product = CALIBRATION[case]
+    return product.path if product else []
 
 
 def slopes_file(case):
     """The AO case's LGS slopes product (config.slopes_spec), or [] without AO."""
-    spec = SLOPES[case]
-    return f"results/slopes/{slopes_key(spec)}.nc" if spec else []
+    product = SLOPES[case]
+    return product.path if product else []
 
 
 REPLAY_FRAMES = STUDY.get("replay_frames", False)
@@ -173,7 +164,7 @@ def figure_inputs(fig):
     return [f"results/cases/{c}/lucky.nc" for c in figure["cases"]]
 
 
-DRAWN_CASES = drawn_cases(STUDY)
+DRAWN_CASES = VIEW.drawn
 """The cases whose results a figure reads: `all` runs them and exports their images as FITS."""
 
 
@@ -193,15 +184,15 @@ def simulation_files(case):
     matrix, calibration, LGS slopes and the calibration they were measured with, and its LGS
     twin's (the twin's own simulation files)."""
     twin = LGS_TWIN[case]
-    key = turbulence_key(TURBULENCE[case])
-    files = [f"results/cases/{case}/telemetry.nc", f"results/turbulence/{key}.npy", f"results/turbulence/{key}.nc"]
+    screens = TURBULENCE[case]
+    files = [f"results/cases/{case}/telemetry.nc", screens.samples_path, screens.path]
     if STUDY.get("keep_frames", False):
         files.append(f"results/cases/{case}/frames.nc")
     files += [] if twin else listify(reconstructor_file(case))
     files += listify(commands_file(case))
     files += [] if twin or SLOPES[case] else listify(calibration_file(case))
     if SLOPES[case]:
-        files += [slopes_file(case), *listify(calibration_file(SLOPES_CASES[slopes_key(SLOPES[case])][0]))]
+        files += [slopes_file(case), *listify(calibration_file(SLOPES_CASES[SLOPES[case].key][0]))]
     if twin:
         files += simulation_files(twin)
     return files
@@ -249,7 +240,7 @@ def simulate_priority(case):
     as early as the no-AO cases that wait for it."""
 
     def work(name):
-        return len(lucky_settings(STUDY, CASES, name)["detectors"]) * len(CASES[name]["targets_arcsec"])
+        return len(VIEW.cases[name].detectors) * len(CASES[name]["targets_arcsec"])
 
     return min(9, max(work(name) for name in CASES if name == case or LGS_TWIN[name] == case) // 2)
 
@@ -264,7 +255,7 @@ def lucky_mem_mb(case):
     estimate as is (``resources.lucky_memory_bytes``: the sweep's 19 detectors, 4.7 GB
     measured with ``cog`` alone; the partial sums once per registration method), at least 3 GB (a field's replay; its memory-mapped screens not counted).
     """
-    return mem_mb(lucky_memory_bytes(lucky_settings(STUDY, CASES, case)), 3000, margin=1.0)
+    return mem_mb(lucky_memory_bytes(VIEW.cases[case].lucky_settings), 3000, margin=1.0)
 
 
 def replay_screens(case):
@@ -272,5 +263,4 @@ def replay_screens(case):
     did not image (a field with a reference star; every case with replay_frames), else none."""
     if not REPLAY_FRAMES and len(imaged_targets(CASES[case])) == len(CASES[case]["targets_arcsec"]):
         return []
-    key = turbulence_key(TURBULENCE[case])
-    return [f"results/turbulence/{key}.npy", f"results/turbulence/{key}.nc"]
+    return [TURBULENCE[case].samples_path, TURBULENCE[case].path]

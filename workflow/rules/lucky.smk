@@ -17,7 +17,7 @@ rule lucky:
         mem_mb=lambda w: lucky_mem_mb(w.case),
         runtime=30,  # minutes; paper fidelity: up to 15 measured
     params:
-        settings=lambda w: canonical_json(lucky_settings(STUDY, CASES, w.case)),
+        settings=lambda w: canonical_json(VIEW.cases[w.case].lucky_settings),
         frames=lambda w, input: ["--frames", input.frames] if input.frames else [],
         replay=lambda w, input: (
             ["--screens", input.replay[0], "--screens-metadata", input.replay[1]] if input.replay else []

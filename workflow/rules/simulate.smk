@@ -32,8 +32,8 @@ rule simulate:
     AO case that measures the same slopes (config.lgs_twin), when the study has one: its own
     loop then only images (a third of the cost)."""
     input:
-        screens=lambda w: f"results/turbulence/{turbulence_key(TURBULENCE[w.case])}.npy",
-        screens_metadata=lambda w: f"results/turbulence/{turbulence_key(TURBULENCE[w.case])}.nc",
+        screens=lambda w: TURBULENCE[w.case].samples_path,
+        screens_metadata=lambda w: TURBULENCE[w.case].path,
         reconstructor=lambda w: [] if LGS_TWIN[w.case] else reconstructor_file(w.case),
         commands=lambda w: commands_file(w.case),
         calibration=lambda w: [] if LGS_TWIN[w.case] or SLOPES[w.case] else calibration_file(w.case),

@@ -28,21 +28,9 @@ import yaml
 from ..io.datasets import atomic_path, code_version, open_dataset, require_finite_lucky
 from ..io.hashing import canonical_json, sha256
 from ..studyspec.lucky import lucky_settings
-from ..studyspec.products import (
-    calibration_key,
-    calibration_spec,
-    commands_key,
-    commands_spec,
-    lgs_twin,
-    reconstructor_key,
-    reconstructor_spec,
-    slopes_key,
-    slopes_spec,
-    turbulence_key,
-    turbulence_spec,
-)
 from ..studyspec.study import drawn_cases, load_study
 from ..studyspec.sweeps import expand_sweeps
+from ..studyspec.view import resolve_study
 from ..version import __version__
 
 FORMAT = "luckyao-archive/1"
@@ -141,18 +129,14 @@ def case_jobs(study: dict, cases: dict, case: str) -> list[str]:
     """``step/name`` of every job ``results/cases/<case>/lucky.nc`` needs from scratch: with
     an LGS twin (``studyspec.products.lgs_twin``), the twin's simulation and its products too (an AO
     case's slopes: ``studyspec.products.slopes_spec``)."""
-    twin = lgs_twin(study, cases, case)
+    view = resolve_study(study, cases)
+    twin = view.cases[case].lgs_twin
     simulated = [twin, case] if twin else [case]
-    jobs = [f"turbulence/{turbulence_key(turbulence_spec(study, cases[case]))}"]
+    jobs = [f"turbulence/{view.cases[case].screens.key}"]
     for name in simulated:
-        config = cases[name]
-        for step, spec, key in (
-            ("reconstructor", reconstructor_spec(config), reconstructor_key),
-            ("calibration", calibration_spec(study, config), calibration_key),
-            ("commands", commands_spec(config), commands_key),
-            ("slopes", slopes_spec(study, config), slopes_key),
-        ):
-            if spec is not None and (job := f"{step}/{key(spec)}") not in jobs:
+        resolved = view.cases[name]
+        for step in ("reconstructor", "calibration", "commands", "slopes"):
+            if (product := getattr(resolved, step)) is not None and (job := f"{step}/{product.key}") not in jobs:
                 jobs.append(job)
     return jobs + [f"simulate/{name}" for name in simulated] + [f"lucky/{case}"]
 

@@ -9,7 +9,8 @@ from ..studyspec.schema import figure_default
 
 @dataclass(frozen=True)
 class CaseSummary:
-    """What tells a case apart in a legend: AO, r0, LGS WFS, DM, beacon height."""
+    """What tells a case apart in a legend: AO, telescope diameter, r0, LGS WFS, beacons and
+    their height, DM."""
 
     name: str
     ao_mode: str
@@ -18,6 +19,8 @@ class CaseSummary:
     wfs_subapertures: int | None
     dm_actuators: int | None
     lgs_height_km: float | None
+    diameter_m: float = 4.2
+    n_beacons: int | None = None
 
     @classmethod
     def of(cls, name: str, case: Case) -> "CaseSummary":
@@ -29,22 +32,25 @@ class CaseSummary:
             wfs_subapertures=case.wfs.n_subapertures if case.lgs else None,
             dm_actuators=case.ao.n_actuators if case.ao.mode != "none" else None,
             lgs_height_km=case.lgs.height_m / 1e3 if case.lgs else None,
+            diameter_m=case.telescope.diameter_m,
+            n_beacons=case.lgs.n_beacons if case.lgs else None,
         )
 
     def parts(self) -> dict[str, str]:
         """Short descriptions by aspect, e.g. ``{"ao": "LTAO", "r0": "r0 13.5 cm", ...}``."""
         ao = {"none": "no AO"}.get(self.ao_mode, self.ao_mode.upper())
         r0 = f"r0 {self.r0_cm:g} cm" + (" (varying)" if self.r0_varies else "")
-        parts = {"ao": ao, "r0": r0}
+        parts = {"ao": ao, "telescope": f"{self.diameter_m:g} m", "r0": r0}
         if self.wfs_subapertures:
             parts["wfs"] = f"{self.wfs_subapertures}x{self.wfs_subapertures} WFS"
+            parts["beacons"] = f"{self.n_beacons} LGS"
             parts["lgs"] = f"LGS {self.lgs_height_km:g} km"
         if self.dm_actuators:
             parts["dm"] = f"{self.dm_actuators}x{self.dm_actuators} DM"
         return parts
 
     def summary(self) -> str:
-        """Every part: ``LTAO, r0 13.5 cm, 8x8 WFS, LGS 22 km, 9x9 DM``."""
+        """Every part: ``LTAO, 4.2 m, r0 13.5 cm, 8x8 WFS, 4 LGS, LGS 22 km, 9x9 DM``."""
         return ", ".join(self.parts().values())
 
 
@@ -52,7 +58,7 @@ def short_labels(summaries: list[CaseSummary]) -> list[str]:
     """Legend labels that say only what differs between the cases (the AO mode always
     when any case has AO); the case names when that leaves two labels equal."""
     parts = [s.parts() for s in summaries]
-    aspects = ["ao", "r0", "wfs", "lgs", "dm"]
+    aspects = ["ao", "telescope", "r0", "wfs", "beacons", "lgs", "dm"]
     differ = [a for a in aspects if len({p.get(a) for p in parts}) > 1 or (a == "ao" and len(parts) == 1)]
     labels = [", ".join(p[a] for a in differ if a in p) for p in parts]
     if len(set(labels)) < len(labels) or not all(labels):

@@ -117,9 +117,34 @@ def refuse_unsafe_overlays(argv: list[str]) -> None:
         sys.exit(f"luckyao: invalid study config: {err}")
 
 
+def snakemake_words(argv: list[str]) -> list[str]:
+    """``bash run.sh study`` words as Snakemake's: the leading ``case=NAME`` and ``key=value``
+    overrides (``studyspec.overrides``) become that case's targets (its ``lucky.nc`` and FITS)
+    and ``--config`` entries, one per top-level key, as JSON (typed again by the Snakefile)."""
+    import json
+
+    from ..studyspec.overrides import parse_overrides, split_words
+    from ..studyspec.schema import ConfigError
+
+    case, overrides, rest = split_words(argv)
+    if case is None and not overrides:
+        return argv
+    if {"--config", "-C"} & set(rest):
+        sys.exit("luckyao: give overrides as key=value words or with --config, not both")
+    try:
+        config = parse_overrides(overrides, case)
+    except ConfigError as err:
+        sys.exit(f"luckyao: {err}")
+    targets = [f"results/cases/{case}/lucky.nc", f"fits/{case}.fits"] if case else []
+    entries = [f"{key}={json.dumps(value)}" for key, value in config.items()]
+    return [*targets, *rest, *(["--config", *entries] if entries else [])]
+
+
 def main(argv: list[str]) -> None:
     """``bash run.sh study ARGS``: clean up if the study folder is idle, then become
-    ``python -m snakemake ARGS`` holding the folder's run lock."""
+    ``python -m snakemake ARGS`` holding the folder's run lock (``case=NAME`` and ``key=value``
+    words first turned into Snakemake's, :func:`snakemake_words`)."""
+    argv = snakemake_words(argv)
     refuse_unsafe_overlays(argv)
     folder = study_folder(argv)
     if folder is not None and folder.is_dir():

@@ -36,21 +36,13 @@ from pathlib import Path
 
 from ..clock import FrameClock, frame_count
 from ..steps.screens import TurbulenceSpec, strip_specs
-from ..studyspec.lucky import lucky_settings, registrations
-from ..studyspec.products import (
-    commands_key,
-    commands_spec,
-    reconstructor_key,
-    reconstructor_spec,
-    slopes_key,
-    slopes_spec,
-    turbulence_key,
-    turbulence_spec,
-)
+from ..studyspec.lucky import registrations
+from ..studyspec.products import commands_spec, reconstructor_spec
 from ..studyspec.resolved import imaged_targets
 from ..studyspec.schema import ConfigError
 from ..studyspec.study import validate_study
 from ..studyspec.sweeps import expand_sweeps
+from ..studyspec.view import ResolvedStudy, resolve_study
 
 BASE_BYTES = 0.4e9
 """Python with numpy, scipy, numba and pyFFTW loaded."""
@@ -175,47 +167,47 @@ def mem_mb(estimate_bytes: float, measured_mb: int = 0, margin: float = MARGIN) 
     return max(measured_mb, 100 * math.ceil(margin * estimate_bytes / 1e8))
 
 
-def study_jobs(study: dict, cases: dict) -> list[tuple[str, str, float, str | None, float]]:
+def study_jobs(view: ResolvedStudy) -> list[tuple[str, str, float, str | None, float]]:
     """(job, the first case it serves, memory estimate, output file or None, its size) of
-    every job of the study."""
+    every job of a resolved study."""
     jobs = {}
 
     def add(job, *values):
         jobs.setdefault(job, values)
 
-    for name, case in cases.items():
-        spec = turbulence_spec(study, case)
-        key = turbulence_key(spec)
+    for name, resolved in view.cases.items():
+        case, screens = resolved.config, resolved.screens
         add(
-            f"turbulence {key}",
+            f"turbulence {screens.key}",
             name,
-            turbulence_memory_bytes(spec),
-            f"results/turbulence/{key}.npy",
-            screens_bytes(spec),
+            turbulence_memory_bytes(screens.spec),
+            screens.samples_path,
+            screens_bytes(screens.spec),
         )
-        if (spec := reconstructor_spec(case)) is not None:
-            key = reconstructor_key(spec)
+        if (product := resolved.reconstructor) is not None:
             add(
-                f"reconstructor {key}",
+                f"reconstructor {product.key}",
                 name,
-                reconstructor_memory_bytes(spec),
-                f"results/reconstructors/{key}.nc",
-                reconstructor_bytes(spec),
+                reconstructor_memory_bytes(product.spec),
+                product.path,
+                reconstructor_bytes(product.spec),
             )
-        if (spec := commands_spec(case)) is not None:
-            key = commands_key(spec)
+        if (product := resolved.commands) is not None:
             add(
-                f"commands {key}", name, commands_memory_bytes(spec), f"results/commands/{key}.nc", commands_bytes(spec)
+                f"commands {product.key}",
+                name,
+                commands_memory_bytes(product.spec),
+                product.path,
+                commands_bytes(product.spec),
             )
-        if (spec := slopes_spec(study, case)) is not None:
-            key = slopes_key(spec)
-            add(f"slopes {key}", name, slopes_memory_bytes(case), f"results/slopes/{key}.nc", slopes_bytes(case))
-        if study.get("replay_frames", False):  # no cube: the telemetry is the simulation's file
+        if (product := resolved.slopes) is not None:
+            add(f"slopes {product.key}", name, slopes_memory_bytes(case), product.path, slopes_bytes(case))
+        if view.config.get("replay_frames", False):  # no cube: the telemetry is the simulation's file
             output, size = f"results/cases/{name}/telemetry.nc", telemetry_bytes(case)
         else:
             output, size = f"results/cases/{name}/frames.nc", frames_bytes(case)
         add(f"simulate {name}", name, simulate_memory_bytes(case), output, size)
-        add(f"lucky {name}", name, lucky_memory_bytes(lucky_settings(study, cases, name)), None, 0.0)
+        add(f"lucky {name}", name, lucky_memory_bytes(resolved.lucky_settings), None, 0.0)
     return [(job, *values) for job, values in jobs.items()]
 
 
@@ -232,9 +224,7 @@ FILE_KINDS = {
 }
 
 
-def preflight(
-    study: dict, cases: dict, folder=".", memory_bytes: float | None = None, parallel_jobs: int = 1
-) -> list[str]:
+def preflight(view: ResolvedStudy, folder=".", memory_bytes: float | None = None, parallel_jobs: int = 1) -> list[str]:
     """One problem per job whose memory estimate exceeds ``memory_bytes`` (default: this
     machine's), and one when the files of the study not yet made would together exceed the
     free disk of ``folder``: every product and, with ``keep_frames``, every frame cube, or
@@ -242,7 +232,7 @@ def preflight(
     memory_bytes = memory_bytes or machine_memory_bytes()
     free_bytes = shutil.disk_usage(folder).free
     problems, pending = [], []
-    for job, case, memory, output, size in study_jobs(study, cases):
+    for job, case, memory, output, size in study_jobs(view):
         if memory > memory_bytes:
             key = "turbulence" if job.startswith("turbulence ") else f"cases.{case}"  # screens: of every case
             problems.append(
@@ -252,8 +242,8 @@ def preflight(
             )
         if output is not None and not (Path(folder) / output).exists():
             pending.append((job, case, output, size))
-    keep_frames = study.get("keep_frames", False)
-    kept = [p for p in pending if keep_frames or study.get("replay_frames", False) or not p[0].startswith("simulate ")]
+    keep_frames, replay = view.config.get("keep_frames", False), view.config.get("replay_frames", False)
+    kept = [p for p in pending if keep_frames or replay or not p[0].startswith("simulate ")]
     passing = sorted((p for p in pending if p not in kept), key=lambda p: p[3], reverse=True)[: max(1, parallel_jobs)]
     needed = sum(p[3] for p in kept + passing)
     if needed > free_bytes:
@@ -282,18 +272,18 @@ class StudyTooLarge(ConfigError):
 
 def checked_study(
     config: dict, folder=".", memory_bytes: float | None = None, parallel_jobs: int | None = None
-) -> tuple[dict, dict]:
+) -> ResolvedStudy:
     """The one pre-flight of a study config, shared by ``luckyao check`` and the workflow (its
     dry run and every run), before any job: the config validated (``ConfigError``, one line per
     problem naming its key), then :func:`preflight` in ``folder`` (``StudyTooLarge``, one line
-    per problem); returns (the study with its sweeps expanded, its resolved cases).
+    per problem); returns the study resolved (``studyspec.view``).
     ``parallel_jobs``: jobs run at once (default: this machine's cores)."""
     study = expand_sweeps(config)
-    cases = validate_study(study)
-    problems = preflight(study, cases, folder, memory_bytes, parallel_jobs or os.cpu_count() or 1)
+    view = resolve_study(study, validate_study(study))
+    problems = preflight(view, folder, memory_bytes, parallel_jobs or os.cpu_count() or 1)
     if problems:
         raise StudyTooLarge("\n".join(problems))
-    return study, cases
+    return view
 
 
 def _gb(n_bytes: float) -> str:

@@ -7,14 +7,20 @@ from .scaling import screen_min_across_m
 from .schema import case_defaults
 
 
-def turbulence_spec(study: dict, case: dict) -> dict:
+def turbulence_spec(study: dict, case: dict, duration_s: float | None = None) -> dict:
     """Everything the shared screens depend on (not r0 or Cn2: those only scale them); the
-    strips' width across the wind for this case's telescope (``scaling.screen_min_across_m``)."""
+    strips' width across the wind for this case's telescope (``scaling.screen_min_across_m``);
+    their length ``duration_s``, by default ``turbulence.duration_s`` when the study pins it,
+    else the case's own (:func:`screens_durations` gives each case the longest of the cases
+    that share its screens)."""
     atm = case["atmosphere"]
     turbulence = {key: value for key, value in study["turbulence"].items() if key != "min_across_diameters"}
+    if duration_s is None:
+        duration_s = turbulence.get("duration_s", case["duration_s"])
     return {
         "seed": study["seed"],
         **turbulence,
+        "duration_s": duration_s,
         "min_across_m": screen_min_across_m(study["turbulence"], case["telescope"]["diameter_m"]),
         "time_step_s": case["time_step_s"],
         "diameter_m": case["telescope"]["diameter_m"],
@@ -27,6 +33,19 @@ def turbulence_spec(study: dict, case: dict) -> dict:
 
 def turbulence_key(spec: dict) -> str:
     return "screens_" + sha256(spec)[:12]
+
+
+def screens_durations(study: dict, cases: dict) -> dict[str, float]:
+    """``{case: length of its screens [s]}``: ``turbulence.duration_s`` when the study pins it,
+    else the longest duration of the cases whose screens are otherwise the same (a 1 s case
+    alone gets 1 s of screens; cases sharing screens get the longest one's)."""
+    if "duration_s" in study["turbulence"]:
+        return {name: study["turbulence"]["duration_s"] for name in cases}
+    groups = {name: sha256(turbulence_spec(study, case, 0.0)) for name, case in cases.items()}
+    longest = {}
+    for name, group in groups.items():
+        longest[group] = max(longest.get(group, 0.0), cases[name]["duration_s"])
+    return {name: longest[group] for name, group in groups.items()}
 
 
 def reconstructor_spec(case: dict) -> dict | None:
@@ -91,14 +110,15 @@ def lgs_chain_config(case: dict) -> dict:
     return {key: value for key, value in case.items() if key not in ("ao", "targets_arcsec", "reference_target")}
 
 
-def slopes_spec(study: dict, case: dict) -> dict | None:
+def slopes_spec(study: dict, case: dict, screens: dict | None = None) -> dict | None:
     """Everything an AO case's LGS slopes depend on (None without AO): its LGS chain, the
-    seed and the screens; cases that differ only in their AO or targets share them."""
+    seed and the screens (their spec, by default :func:`turbulence_spec`'s); cases that differ
+    only in their AO or targets share them."""
     if case["ao"]["mode"] == "none":
         return None
     return {
         "seed": study["seed"],
-        "screens": turbulence_key(turbulence_spec(study, case)),
+        "screens": turbulence_key(screens or turbulence_spec(study, case)),
         "case": lgs_chain_config(case),
     }
 
@@ -107,22 +127,23 @@ def slopes_key(spec: dict) -> str:
     return "slopes_" + sha256(spec)[:12]
 
 
-def lgs_twin(study: dict, cases: dict, name: str) -> str | None:
+def lgs_twin(study: dict, cases: dict, name: str, screens: dict | None = None) -> str | None:
     """The case whose simulation measures a no-AO case's LGS telemetry, so that its own
     simulation images the science targets only: the first AO case (by name) with the same
-    :func:`lgs_spec` and screens, whose simulation measures exactly the same slopes; None
-    for a case with AO, without LGS, or with no such case."""
+    :func:`lgs_spec` and screens (``screens``: each case's screens spec, by default
+    :func:`turbulence_spec`'s), whose simulation measures exactly the same slopes; None for a
+    case with AO, without LGS, or with no such case."""
     case = cases[name]
     if case["ao"]["mode"] != "none" or (spec := lgs_spec(case)) is None:
         return None
-    screens = turbulence_spec(study, case)
+    screens = screens or {other: turbulence_spec(study, cases[other]) for other in cases}
     return next(
         (
             other
             for other in sorted(cases)
             if cases[other]["ao"]["mode"] != "none"
             and lgs_spec(cases[other]) == spec
-            and turbulence_spec(study, cases[other]) == screens
+            and screens[other] == screens[name]
         ),
         None,
     )

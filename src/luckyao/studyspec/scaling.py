@@ -16,6 +16,11 @@ they were derived):
   so the image is not aliased without oversampling the FFT (``optics.imaging``). The pupil
   sampling is ``lambda / field`` (3.3 cm at 800 nm over 5"), whatever the diameter.
 
+Besides the size, :func:`derived_case` gives a case that leaves out
+``tomography.prior_r0_500nm_m`` the case's own ``atmosphere.r0_500nm_m``: the tomography's prior
+follows the case's seeing unless the case pins it (``studyspec.study.plausibility_warnings``
+names a pinned prior that differs).
+
 The turbulence strips are at least ``turbulence.min_across_diameters`` diameters wide across the
 wind (:func:`screen_min_across_m`). Writing a derived key together with the parameter it would
 be derived from (``wfs.n_subapertures`` with ``telescope.subaperture_pitch_m``) is refused by key.
@@ -117,6 +122,24 @@ def derive_size_defaults(case: dict, where: str) -> dict:
             _parameter(case, "camera.pixels_per_lambda_over_d"),
         )
     return out
+
+
+PRIOR_KEY = "tomography.prior_r0_500nm_m"
+"""The tomography's prior r0: by default the case's ``atmosphere.r0_500nm_m`` (:func:`derived_case`)."""
+
+
+def derived_case(case: dict, where: str) -> dict:
+    """A merged case (schema-valid) resolved: :func:`derive_size_defaults`, and the prior's r0
+    (:data:`PRIOR_KEY`) the case's mean r0 when left out."""
+    out = derive_size_defaults(case, where)
+    out["tomography"].setdefault("prior_r0_500nm_m", out["atmosphere"]["r0_500nm_m"])
+    return out
+
+
+def derived_keys(merged: dict, resolved: dict) -> dict[str, object]:
+    """``{key path: value}`` of the keys a case left out and got derived (:data:`DERIVED_KEYS`,
+    :data:`PRIOR_KEY`)."""
+    return {path: _get(resolved, path) for path in [*DERIVED_KEYS, PRIOR_KEY] if _get(merged, path) is None}
 
 
 def screen_min_across_m(turbulence: dict, diameter_m: float) -> float:

@@ -8,7 +8,7 @@ the first problem of each case and figure is reported as a ``ConfigError`` namin
 from ..clock import frame_count
 from .lucky import MAX_SWEEP_DETECTORS, SIGNAL_KINDS, error_blocks, sweep_detector_list
 from .resolved import criteria_of
-from .scaling import derive_size_defaults
+from .scaling import PRIOR_KEY, derived_case
 from .schema import ConfigError, check_finite, deep_merge, load_schema, validate_keys
 from .sweeps import expand_sweeps
 from .yamlfile import read_config_file
@@ -32,7 +32,7 @@ def _check_case(name: str, case: dict, turbulence: dict) -> None:
         raise ConfigError(f"config key '{where}.camera.frame_time_s': must be a whole number of time_step_s")
     if case["duration_s"] < case["camera"]["frame_time_s"]:
         raise ConfigError(f"config key '{where}.duration_s': shorter than one camera frame")
-    if case["duration_s"] > turbulence["duration_s"] + 1e-9:
+    if "duration_s" in turbulence and case["duration_s"] > turbulence["duration_s"] + 1e-9:
         raise ConfigError(
             f"config key '{where}.duration_s': {case['duration_s']} s exceeds "
             f"turbulence.duration_s = {turbulence['duration_s']} s"
@@ -98,7 +98,7 @@ def validate_study(config: dict, schema: dict | None = None) -> dict:
         resolved = deep_merge(config["base"], override)
         try:
             validate_keys(resolved, case_schema, f"cases.{name}")
-            resolved = derive_size_defaults(resolved, f"cases.{name}")
+            resolved = derived_case(resolved, f"cases.{name}")
             _check_case(name, resolved, config["turbulence"])
             n_frames = frame_count(resolved)
             blocks = error_blocks(config["lucky"])
@@ -290,7 +290,8 @@ outside are allowed but warned about (a unit slip, e.g. r0 in cm written as metr
 
 def plausibility_warnings(cases: dict) -> list[str]:
     """One line per value of a resolved case outside :data:`PLAUSIBLE_RANGES` or a wind
-    speed above 100 m/s, naming the key; the config stays valid."""
+    speed above 100 m/s, naming the key, and one naming the LGS cases whose tomography prior
+    is pinned to another r0 than theirs; the config stays valid."""
     lines = []
     for name, case in cases.items():
         for path, low, high, unit, what in PLAUSIBLE_RANGES:
@@ -305,7 +306,22 @@ def plausibility_warnings(cases: dict) -> list[str]:
         fastest = max(case["atmosphere"]["wind_speed_m_s"])
         if fastest > 100:
             lines.append(f"config key 'cases.{name}.atmosphere.wind_speed_m_s': {fastest:g} m/s is above 100 m/s")
+    pinned = [
+        name
+        for name, case in cases.items()
+        if case["lgs"]["enabled"] and _prior_r0_m(case) != case["atmosphere"]["r0_500nm_m"]
+    ]
+    if pinned:
+        lines.append(
+            f"config key '{PRIOR_KEY}': pinned apart from the case's atmosphere.r0_500nm_m in the cases "
+            f"{', '.join(pinned)} (the tomography's prior assumes other seeing than the case's; left out, "
+            "it follows the case's r0)"
+        )
     return lines
+
+
+def _prior_r0_m(case: dict) -> float:
+    return case["tomography"]["prior_r0_500nm_m"]
 
 
 def unused_cases(config: dict) -> list[str]:

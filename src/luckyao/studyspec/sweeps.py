@@ -13,7 +13,7 @@ Every combination of the values (the product, in the order written) is a case, a
 override of ``base`` like any other, named by its values:
 ``r0_r0_500nm_m-0.1_mode-ltao`` (``<sweep>_<key>-<value>_...``, the key's last part,
 or its whole path when two parameters share a last part). A point whose resolved
-config equals a case of ``cases`` is that case (it is not simulated twice). Adding
+config (derived keys too) equals a case of ``cases`` is that case (it is not simulated twice). Adding
 values adds cases and leaves the others' names and configs as they were, so only the
 new ones run. A figure with ``sweep: r0`` draws every point of the grid.
 """
@@ -23,6 +23,8 @@ import itertools
 import math
 from dataclasses import dataclass
 
+from ..io.hashing import canonical_json
+from .scaling import DERIVED_KEYS, PRIOR_KEY, derived_case
 from .schema import ConfigError, deep_merge, name_problem
 
 MAX_GRID_POINTS = 1000
@@ -61,9 +63,7 @@ def _nested(path: str, value) -> dict:
 
 
 def _check_path(base: dict, path: str, where: str) -> None:
-    from .scaling import DERIVED_KEYS  # keys a case may leave to the diameter, and their parameters
-
-    if path in DERIVED_KEYS or path in DERIVED_KEYS.values():
+    if path in DERIVED_KEYS or path in DERIVED_KEYS.values() or path == PRIOR_KEY:  # keys a case may leave out
         return
     node = base
     for part in path.split("."):
@@ -86,7 +86,7 @@ def sweep_points(config: dict, sweep: str) -> list[SweepPoint]:
     labels = _labels(paths)
     existing = {}
     for name, override in config.get("cases", {}).items():
-        existing.setdefault(repr(deep_merge(config["base"], override)), name)
+        existing.setdefault(_resolved_text(config["base"], override), name)
     points, named = [], {}
     for values in itertools.product(*(parameters[p] for p in paths)):
         override = copy.deepcopy(spec.get("overrides", {}))
@@ -107,9 +107,20 @@ def sweep_points(config: dict, sweep: str) -> list[SweepPoint]:
                 "sweep one of them"
             )
         named[name] = values
-        name = existing.get(repr(deep_merge(config["base"], override)), name)
+        name = existing.get(_resolved_text(config["base"], override), name)
         points.append(SweepPoint(name, dict(zip(paths, values))))
     return points
+
+
+def _resolved_text(base: dict, override: dict) -> str:
+    """A case's resolved config as text (its derived keys too: a point that pins a key to the
+    value the case derives is that case), or as merged when it does not resolve (its problem is
+    reported with the cases)."""
+    merged = deep_merge(base, override)
+    try:
+        return canonical_json(derived_case(merged, ""))
+    except (ConfigError, KeyError, TypeError, AttributeError):
+        return canonical_json(merged)
 
 
 def _point_text(paths, values) -> str:
