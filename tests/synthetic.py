@@ -21,4 +21,6 @@ def lucky_dataset(value: float, n_blocks: int, **per_frame) -> xr.Dataset:
             (("target", "detector", "frame"), values[None, None, :]) if name == "frame_strehl" else (("frame",), values)
         )
     data["strehl_block"] = (("block",), np.zeros(n_blocks))
+    n_frames = len(per_frame.get("frame_strehl", [])) or 100
+    data["n_frames_selected"] = (("fraction",), [max(1, round(f * n_frames)) for f in FRACTIONS])
     return xr.Dataset(data, coords={"criterion": CRITERIA, "fraction": FRACTIONS, "detector": ["noiseless"]})

@@ -439,7 +439,7 @@ def test_knees_interpolate_the_crossing_in_log_signal_and_magnitudes_follow_the_
     photons per frame follows F_0 dlambda A T t / (h c / lambda) (I = 15: ~870 photons)."""
     import xarray as xr
 
-    from luckyao.figures.registration import i_magnitude, knees, photons_per_frame
+    from luckyao.figures.registration import collecting_area_m2, i_magnitude, knees, photons_per_frame
 
     signal = np.array([10.0, 100.0, 1000.0, 10000.0])
     dims = ("case", "signal")
@@ -461,6 +461,14 @@ def test_knees_interpolate_the_crossing_in_log_signal_and_magnitudes_follow_the_
     at_zero = 1.13e-8 * 0.3 * np.pi / 4 * (4.2**2 - 1.2**2) * 0.5 * 0.01 / (h * c / 0.8e-6)
     assert float(photons_per_frame(15.0)) == pytest.approx(at_zero * 1e-6, rel=1e-9)
     assert 800 < float(photons_per_frame(15.0)) < 950
+    # through another aperture: the same star gives photons in proportion to the collecting area
+    area_8m = collecting_area_m2(8.2, 2.286)
+    assert float(photons_per_frame(15.0, area_8m) / photons_per_frame(15.0)) == pytest.approx(
+        (8.2**2 - 2.286**2) / (4.2**2 - 1.2**2)
+    )
+    assert float(i_magnitude(1000.0, area_8m) - i_magnitude(1000.0)) == pytest.approx(
+        2.5 * np.log10(area_8m / collecting_area_m2(4.2, 1.2))
+    )
 
 
 def test_methods_sharing_the_passes_give_each_method_its_own_run_bit_for_bit():

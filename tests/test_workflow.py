@@ -16,6 +16,8 @@ import pytest
 import xarray as xr
 import yaml
 
+from luckyao.figures.registration import i_magnitude
+
 from studies import REPO, TINY, snakemake
 
 pytestmark = pytest.mark.workflow  # runs Snakemake, a study or the command line: -m 'not workflow' skips it
@@ -411,6 +413,11 @@ def test_registration_methods_along_their_dimension_and_the_knees(finished_run):
     )
     assert result.returncode == 0, result.stderr
     assert "| xcorr |" in result.stdout and "| cog |" in result.stdout
+    limiting = xr.open_dataset(workdir / "figures" / "limiting.nc")  # the same knees, as magnitudes at 4.2 m
+    for metric in ("strehl", "d50_arcsec"):
+        knee = figure[f"{metric}_knee_photons"].sel(case="lgs")
+        np.testing.assert_array_equal(limiting[f"{metric}_knee_photons"].isel(series=0, diameter=0), knee)
+        np.testing.assert_allclose(limiting[f"{metric}_knee_i_mag"].isel(series=0, diameter=0), i_magnitude(knee))
 
 
 def test_without_frame_cubes_every_result_is_the_stored_cubes_bit_for_bit(finished_run, tmp_path):

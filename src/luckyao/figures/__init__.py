@@ -9,7 +9,8 @@ one colour-blind-safe palette (``style``).
 
 Public objects, by module --
 settings: FigureSettings, CaseSummary; quality: the quality_vs_fraction,
-quality_vs_distance, quality_vs_parameter and comparisons kinds; diameter: quality_vs_diameter; signal:
+quality_vs_distance, quality_vs_parameter and comparisons kinds; diameter: quality_vs_diameter; limiting:
+limiting_magnitude; signal:
 quality_vs_signal; wavefront: asterism, rms_truth, residuals; tables:
 long_exposure_check, long_exposure_table, long_exposure_markdown, value_with_error;
 gallery: psf_gallery.
@@ -25,6 +26,7 @@ from ..io.datasets import open_dataset, provenance, require_finite_lucky, write_
 from ..io.hashing import sha256
 from .diameter import draw_quality_vs_diameter, quality_vs_diameter_data
 from .gallery import draw_psf_gallery, psf_gallery_data
+from .limiting import draw_limiting_magnitude, limiting_magnitude_data
 from .quality import (
     comparisons_data,
     draw_comparisons,
@@ -56,6 +58,7 @@ FIGURE_KINDS = {
     "quality_vs_fraction": (quality_vs_fraction_data, draw_quality_vs_fraction),
     "quality_vs_parameter": (quality_vs_parameter_data, draw_quality_vs_parameter),
     "quality_vs_diameter": (quality_vs_diameter_data, draw_quality_vs_diameter),
+    "limiting_magnitude": (limiting_magnitude_data, draw_limiting_magnitude),
     "long_exposure_check": (long_exposure_check_data, draw_long_exposure_check),
     "long_exposure_table": (long_exposure_table_data, draw_long_exposure_table),
     "quality_vs_signal": (quality_vs_signal_data, draw_quality_vs_signal),
@@ -66,7 +69,7 @@ FIGURE_KINDS = {
     "psf_gallery": (psf_gallery_data, draw_psf_gallery),
 }
 
-REGISTRATION_KINDS = ("registration", "quality_vs_signal")
+REGISTRATION_KINDS = ("registration", "quality_vs_signal", "limiting_magnitude")
 """The kinds drawn for every registration method; the others draw the baseline, ``cog``."""
 
 

@@ -2,16 +2,17 @@
 
 The cases of a ``quality_vs_diameter`` figure fall into series that differ only in their
 telescope's size (and what the size derives, studyspec/scaling.py): a series per AO mode and
-beacon height (``LTAO, LGS 22 km``), a point per diameter. The probability of a lucky frame
-is the fraction of frames whose short-exposure Strehl (the detected frame's peak over the
-diffraction-limited peak) exceeds each threshold; its Monte-Carlo error comes from the
-case's time blocks (batch means, as every other error of the study).
+beacon height (``LTAO, LGS 22 km``), or as ``series_labels`` names it, a point per diameter.
+The probability of a lucky frame is the fraction of frames whose short-exposure Strehl (the
+detected frame's peak over the diffraction-limited peak) exceeds each threshold, with its
+Wilson interval at the frames' effective sample size (:mod:`luckyao.lucky.proportions`):
+never of zero width, also where no frame qualifies.
 """
 
 import numpy as np
 import xarray as xr
 
-from ..lucky.accumulation import batch_mean_error
+from ..lucky.proportions import Z_ONE_SIGMA, lucky_fraction
 from .settings import FigureSettings
 from .style import CRITERIA, LINE_STYLES, MARKERS, colour, new_figure, series_fraction_lines, with_error
 
@@ -19,26 +20,22 @@ SHOWN = {"strehl": "Strehl ratio", "d50_arcsec": "50% energy diameter [arcsec]"}
 """The integrated-image metrics drawn against the diameter (FWHM stays in the dataset)."""
 
 
-def _series_label(summary) -> str:
-    """What a case's series is: its AO mode and, with AO, its beacons' height."""
+def series_label(settings: FigureSettings, summary) -> str:
+    """What a case's series is: as the figure's ``series_labels`` names it, else its AO mode
+    and, with AO, its beacons' height."""
+    named = dict(settings.series_labels)
+    if summary.name in named:
+        return named[summary.name]
     parts = summary.parts()
     return parts["ao"] if summary.ao_mode == "none" else f"{parts['ao']}, {parts['lgs']}"
 
 
-def lucky_frame_probability(frame_strehl: np.ndarray, threshold: float, n_blocks: int) -> tuple[float, float]:
-    """Fraction of frames with short-exposure Strehl above ``threshold``, and its batch-means
-    error over ``n_blocks`` time blocks (NaN with fewer than two)."""
-    lucky = (np.asarray(frame_strehl) > threshold).astype(float)
-    return float(lucky.mean()), batch_mean_error(lucky, n_blocks) if n_blocks >= 2 else np.nan
-
-
-def quality_vs_diameter_data(settings: FigureSettings, datasets) -> xr.Dataset:
-    """Integrated-image quality (first target) per series, diameter, criterion and fraction, and
-    the probability of a lucky frame per series, diameter and Strehl threshold, with errors."""
+def series_points(settings: FigureSettings) -> tuple[list[str], list[float], dict]:
+    """The figure's series, its diameters, and ``{(series, diameter): case index}``; two cases
+    at one point refused."""
     summaries = settings.summaries()
     diameters = [settings.case(name).telescope.diameter_m for name in settings.cases]
-    labels = [_series_label(s) for s in summaries]
-    series, x_values = list(dict.fromkeys(labels)), sorted(set(diameters))
+    labels = [series_label(settings, s) for s in summaries]
     where = {}
     for i, (label, diameter) in enumerate(zip(labels, diameters)):
         if (label, diameter) in where:
@@ -47,6 +44,20 @@ def quality_vs_diameter_data(settings: FigureSettings, datasets) -> xr.Dataset:
                 f"{label} at {diameter:g} m"
             )
         where[label, diameter] = i
+    return list(dict.fromkeys(labels)), sorted(set(diameters)), where
+
+
+def _first_target_cog(values: xr.DataArray) -> xr.DataArray:
+    """The first target's values, of the baseline registration (``cog``), where they have those dimensions."""
+    values = values.isel(target=0) if "target" in values.dims else values
+    return values.sel(registration="cog") if "registration" in values.dims else values
+
+
+def quality_vs_diameter_data(settings: FigureSettings, datasets) -> xr.Dataset:
+    """Integrated-image quality (first target) per series, diameter, criterion and fraction, the
+    frames behind each fraction, and the probability of a lucky frame per series, diameter and
+    Strehl threshold, with its interval."""
+    series, x_values, where = series_points(settings)
     criteria, fractions = list(settings.criteria), list(settings.fractions)
     thresholds = list(settings.strehl_thresholds)
     shape = (len(series), len(x_values))
@@ -55,33 +66,48 @@ def quality_vs_diameter_data(settings: FigureSettings, datasets) -> xr.Dataset:
         for name in with_error(datasets, metric):
             table = np.full(shape + (len(criteria), len(fractions)), np.nan)
             for (label, diameter), i in where.items():
-                table[series.index(label), x_values.index(diameter)] = (
-                    datasets[i][name]
-                    .sel(criterion=criteria, fraction=fractions, detector=settings.detector)
-                    .isel(target=0)
-                    .values
-                )
+                table[series.index(label), x_values.index(diameter)] = _first_target_cog(
+                    datasets[i][name].sel(criterion=criteria, fraction=fractions, detector=settings.detector)
+                ).values
             data[name] = (("series", "diameter", "criterion", "fraction"), table, dict(datasets[0][name].attrs))
-    probability, error = np.full(shape + (len(thresholds),), np.nan), np.full(shape + (len(thresholds),), np.nan)
+    counts = np.full(shape + (len(fractions),), -1, dtype=np.int64)
     for (label, diameter), i in where.items():
-        frames = datasets[i]["frame_strehl"].sel(detector=settings.detector)
-        frames = frames.isel(target=0) if "target" in frames.dims else frames
+        counts[series.index(label), x_values.index(diameter)] = _first_target_cog(
+            datasets[i].n_frames_selected.sel(fraction=fractions)
+        )
+    data["n_frames_selected"] = (
+        ("series", "diameter", "fraction"),
+        counts,
+        {"units": "1", "long_name": "frames selected at each fraction (-1: no case at this point)"},
+    )
+    names = ("fraction", "low", "high", "n_effective", "n_frames")
+    lucky = {name: np.full(shape + (len(thresholds),), np.nan) for name in names}
+    for (label, diameter), i in where.items():
+        frames = _first_target_cog(datasets[i]["frame_strehl"].sel(detector=settings.detector))
         cell = series.index(label), x_values.index(diameter)
         for k, threshold in enumerate(thresholds):
-            probability[cell + (k,)], error[cell + (k,)] = lucky_frame_probability(
-                frames.values, threshold, datasets[i].sizes.get("block", 0)
-            )
+            found = lucky_fraction(frames.values, threshold, datasets[i].sizes.get("block", 0))
+            for name in names:
+                lucky[name][cell + (k,)] = found[name]
     dims = ("series", "diameter", "threshold")
+    interval = f"Wilson score interval ({Z_ONE_SIGMA:g} sigma, 68.3 %) at the effective sample size"
     data["lucky_probability"] = (
         dims,
-        probability,
+        lucky["fraction"],
         {"units": "1", "long_name": "fraction of frames whose short-exposure Strehl exceeds the threshold"},
     )
-    data["lucky_probability_error"] = (
+    data["lucky_probability_low"] = (dims, lucky["low"], {"units": "1", "long_name": f"lower bound: {interval}"})
+    data["lucky_probability_high"] = (dims, lucky["high"], {"units": "1", "long_name": f"upper bound: {interval}"})
+    data["lucky_probability_frames_effective"] = (
         dims,
-        error,
-        {"units": "1", "long_name": "Monte-Carlo standard error of lucky_probability (time blocks, batch means)"},
+        lucky["n_effective"],
+        {
+            "units": "1",
+            "long_name": "effective number of independent frames: frames over the variance inflation of "
+            "the frame Strehl's mean (time blocks, batch means)",
+        },
     )
+    data["lucky_probability_frames"] = (dims, lucky["n_frames"], {"units": "1", "long_name": "frames counted"})
     cases = np.full(shape, "", dtype=object)
     for (label, diameter), i in where.items():
         cases[series.index(label), x_values.index(diameter)] = settings.cases[i]
@@ -120,10 +146,11 @@ def draw_quality_vs_diameter(ds: xr.Dataset, title: str):
     for s, series in enumerate(ds.series.values):
         for k, threshold in enumerate(ds.threshold.values):
             cell = ds.sel(series=series, threshold=threshold)
+            p = cell.lucky_probability.values
             ax.errorbar(
                 x,
-                cell.lucky_probability.values,
-                yerr=cell.lucky_probability_error.values,
+                p,
+                yerr=[p - cell.lucky_probability_low.values, cell.lucky_probability_high.values - p],
                 color=colour(s),
                 ls=LINE_STYLES[k % 4],
                 marker=MARKERS[k % 8],
@@ -145,7 +172,7 @@ def draw_quality_vs_diameter(ds: xr.Dataset, title: str):
         ncol=ds.sizes["fraction"],
         fontsize=8,
         title="colour: AO and beacons; line style and marker: fraction of frames selected\n"
-        "error bars: ±1 Monte-Carlo standard error (time blocks)",
+        "error bars: ±1 Monte-Carlo standard error (time blocks); probability: Wilson 68 % interval",
         title_fontsize=8,
     )
     fig.suptitle(f"{title}: integrated-image quality vs telescope diameter ({ds.attrs['detector']} detector)")

@@ -35,22 +35,29 @@ TELESCOPE_AREA_M2 = np.pi / 4 * (4.2**2 - 1.2**2)
 """The 4.2 m telescope's collecting area, less the 1.2 m central obscuration [m^2]."""
 
 
-def photons_at_zero_magnitude() -> float:
-    """Detected photons per frame of an I = 0 star: F_lambda dlambda A T t / (h c / lambda)."""
+def collecting_area_m2(diameter_m: float, obscuration_m: float) -> float:
+    """A telescope's collecting area, its central obscuration's taken away [m^2]."""
+    return np.pi / 4 * (diameter_m**2 - obscuration_m**2)
+
+
+def photons_at_zero_magnitude(area_m2: float = TELESCOPE_AREA_M2) -> float:
+    """Detected photons per frame of an I = 0 star: F_lambda dlambda A T t / (h c / lambda),
+    through a collecting area ``area_m2`` (default: the 4.2 m telescope's)."""
     photon_energy_j = 6.62607015e-34 * 2.99792458e8 / (I_WAVELENGTH_UM * 1e-6)
-    power_w = I_ZERO_POINT_W_M2_UM * I_BANDWIDTH_UM * TELESCOPE_AREA_M2 * THROUGHPUT
+    power_w = I_ZERO_POINT_W_M2_UM * I_BANDWIDTH_UM * area_m2 * THROUGHPUT
     return power_w * FRAME_TIME_S / photon_energy_j
 
 
-def i_magnitude(photons_per_frame):
+def i_magnitude(photons_per_frame, area_m2: float = TELESCOPE_AREA_M2):
     """The I magnitude of a star giving ``photons_per_frame`` detected photons per frame
-    (:func:`photons_at_zero_magnitude`; 866 photons at I = 15, 55 at I = 18)."""
-    return 2.5 * np.log10(photons_at_zero_magnitude() / np.asarray(photons_per_frame, dtype=float))
+    through ``area_m2`` (:func:`photons_at_zero_magnitude`; at 4.2 m 866 photons at I = 15, 55
+    at I = 18)."""
+    return 2.5 * np.log10(photons_at_zero_magnitude(area_m2) / np.asarray(photons_per_frame, dtype=float))
 
 
-def photons_per_frame(i_mag):
+def photons_per_frame(i_mag, area_m2: float = TELESCOPE_AREA_M2):
     """The inverse of :func:`i_magnitude`."""
-    return photons_at_zero_magnitude() * 10 ** (-0.4 * np.asarray(i_mag, dtype=float))
+    return photons_at_zero_magnitude(area_m2) * 10 ** (-0.4 * np.asarray(i_mag, dtype=float))
 
 
 def registration_data(settings: FigureSettings, datasets) -> xr.Dataset:

@@ -82,6 +82,8 @@ class FigureSettings:
     read_noise_e: tuple[float, ...] = ()
     metric: str = "strehl"
     strehl_thresholds: tuple[float, ...] = field(default_factory=lambda: tuple(figure_default("strehl_thresholds")))
+    series_labels: tuple[tuple[str, str], ...] = ()
+    """(case, series) pairs naming some cases' series (``series_labels``)."""
     window_s: float = field(default_factory=lambda: figure_default("window_s"))
     layer_heights_m: tuple[float, ...] = ()
     pairs: tuple = ()
@@ -99,6 +101,8 @@ class FigureSettings:
             raise ValueError(f"figure settings: unknown keys {sorted(unknown)}")
         tuples = {"cases", "criteria", "fractions", "read_noise_e", "layer_heights_m", "pairs", "strehl_thresholds"}
         values = {k: tuple(v) if k in tuples else v for k, v in settings.items()}
+        if "series_labels" in values:
+            values["series_labels"] = tuple(sorted(values["series_labels"].items()))
         if "sweep_points" in values:
             values["sweep_points"] = tuple((p[0], dict(p[1])) for p in values["sweep_points"])
         return cls(**values)

@@ -15,7 +15,11 @@ KINDS = {
     "per value of the sweep's other parameters, a line style per fraction selected.",
     "quality_vs_diameter": "Integrated-image Strehl ratio and 50%-energy diameter vs the telescope diameter, a row per "
     "selection criterion, a colour per AO mode and beacon height, a line style per fraction "
-    "selected; and the probability of a lucky frame (short-exposure Strehl above a threshold).",
+    "selected; and the probability of a lucky frame (short-exposure Strehl above a threshold), with its Wilson "
+    "interval.",
+    "limiting_magnitude": "The limiting I magnitude of the reference star vs the telescope diameter: the detector "
+    "sweep's knees (90 % of the noiseless integrated Strehl; d50 within 10 %) through each case's aperture "
+    "(100 Hz frames), a colour per AO mode and beacon height, a line style per registration method.",
     "quality_vs_signal": "Integrated-image quality vs detected photons per lucky frame (the detector sweep: Poisson "
     "photon noise and Gaussian read noise), a row per read noise and a column per fraction "
     "selected; the noiseless detector's value for reference; noise-dominated points (more than "

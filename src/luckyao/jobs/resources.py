@@ -148,14 +148,20 @@ crop, the encircled energy's 4,357 radial sums and the flux per frame, for the 4
 no FFT code; tests/test_registration.py checks it against the layout."""
 
 
+MEASURED_FRACTIONS = 9
+"""The fractions of ``lucky.fractions`` (the default's) with which a lucky job's sums were measured."""
+
+
 def lucky_memory_bytes(settings: dict) -> float:
     """A case's post-processing (``studyspec.lucky.lucky_settings``): 1.5 GB and, per detector and
     registration method (their sums all held at once: the methods share the passes over the
     frames), 0.21 GB of partial sums of whole frames for a 256-pixel camera (``cog``), or
-    :data:`SUBPIXEL_SUMS_FRACTION` of that for a sub-pixel method; replaying the frames
-    (``replay_frames``), the simulation's memory besides (its block of frames, the DM commands)."""
+    :data:`SUBPIXEL_SUMS_FRACTION` of that for a sub-pixel method, for the 9 fractions of
+    ``lucky.fractions`` they were measured with (the sums hold one image per fraction); replaying
+    the frames (``replay_frames``), the simulation's memory besides (its block of frames, the DM
+    commands)."""
     case = settings["case_config"]
-    pixels = (case["camera"]["n_pixels"] / 256) ** 2
+    pixels = (case["camera"]["n_pixels"] / 256) ** 2 * len(settings["fractions"]) / MEASURED_FRACTIONS
     methods = sum(1.0 if name == "cog" else SUBPIXEL_SUMS_FRACTION for name in registrations(settings))
     replay = simulate_memory_bytes(case) if settings.get("replay_frames", False) else 0.0
     return 1.5e9 + 0.21e9 * pixels * len(settings["detectors"]) * methods + replay

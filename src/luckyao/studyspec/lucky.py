@@ -5,7 +5,7 @@ import numpy as np
 
 from .schema import load_schema
 
-SIGNAL_KINDS = ("quality_vs_signal", "registration")
+SIGNAL_KINDS = ("quality_vs_signal", "registration", "limiting_magnitude")
 """The figure kinds drawn against the detector sweep: their cases get it and every registration method."""
 
 

@@ -201,6 +201,7 @@ def _check_figure(fig_id: str, figure: dict, cases: dict, config: dict) -> None:
         "quality_vs_parameter": ("sweep", "criteria", "fractions"),
         "psf_gallery": ("criteria", "fractions"),
         "quality_vs_diameter": ("criteria", "fractions"),
+        "limiting_magnitude": ("criteria", "fractions"),
     }
     for key in needs.get(figure["kind"], ()):
         if key not in figure:
