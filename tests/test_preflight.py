@@ -405,3 +405,20 @@ def test_replaying_frames_refuses_a_kept_cube_and_an_apodised_case_by_key(what):
         key = "config key 'cases.ltao.ao.apodisation': an adaptively apodised case cannot be replayed"
     with pytest.raises(ConfigError, match=key):
         validate_study(expand_sweeps(study))
+
+
+def test_wall_times_grow_with_the_telescope_and_the_passes_of_a_replay():
+    """SLURM wall times: a stored cube's lucky job keeps the measured 30 minutes; replaying a
+    16 m case of 100 s (40,000 steps) redoes its science path once per pass, 3 with noise."""
+    from luckyao.jobs.resources import lucky_minutes, simulate_minutes
+
+    study = dict(tiny(), replay_frames=True)
+    study["turbulence"].pop("duration_s")  # each case's screens as long as it needs
+    study["cases"]["big"] = {"duration_s": 100.0, "telescope": {"diameter_m": 16.0, "obscuration_m": 4.571}}
+    cases = validate_study(expand_sweeps(study))
+    view = resolve_study(expand_sweeps(study), cases)
+    settings = view.cases["big"].lucky_settings
+    assert simulate_minutes(cases["good"]) == 60 and simulate_minutes(cases["big"]) > 60
+    noiseless = dict(settings, detectors={"noiseless": {"photons_per_frame": None, "read_noise_e": 0.0}})
+    assert 30 < lucky_minutes(noiseless) < lucky_minutes(dict(settings, detectors={"f": {"photons_per_frame": 10}}))
+    assert lucky_minutes({k: v for k, v in settings.items() if k != "replay_frames"}) == 30

@@ -12,10 +12,12 @@ from luckyao.jobs.resources import (
     checked_study,
     commands_memory_bytes,
     lucky_memory_bytes,
+    lucky_minutes,
     machine_memory_bytes,
     mem_mb,
     reconstructor_memory_bytes,
     simulate_memory_bytes,
+    simulate_minutes,
     slopes_memory_bytes,
     turbulence_memory_bytes,
 )

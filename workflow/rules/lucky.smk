@@ -15,7 +15,7 @@ rule lucky:
     threads: 1
     resources:
         mem_mb=lambda w: lucky_mem_mb(w.case),
-        runtime=30,  # minutes; paper fidelity: up to 15 measured
+        runtime=lambda w: lucky_minutes(VIEW.cases[w.case].lucky_settings),  # paper fidelity: up to 15 measured
     params:
         settings=lambda w: canonical_json(VIEW.cases[w.case].lucky_settings),
         frames=lambda w, input: ["--frames", input.frames] if input.frames else [],

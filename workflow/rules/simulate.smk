@@ -55,7 +55,7 @@ rule simulate:
     resources:
         # paper fidelity: 2-3 GB measured (the screens are memory-mapped)
         mem_mb=lambda w: mem_mb(simulate_memory_bytes(CASES[w.case]), 4000),
-        runtime=60,  # minutes; paper fidelity: 4-10 per target, up to 30 for a 7-target field case
+        runtime=lambda w: simulate_minutes(CASES[w.case]),  # paper fidelity: 4-10 per target, 30 for a 7-target field
     params:
         case=lambda w: canonical_json(CASES[w.case]),
         seed=STUDY["seed"],

@@ -167,6 +167,35 @@ def lucky_memory_bytes(settings: dict) -> float:
     return 1.5e9 + 0.21e9 * pixels * len(settings["detectors"]) * methods + replay
 
 
+STEP_MS_8M, STEP_EXPONENT = 5.4, 2.8
+"""One core's whole-loop ms per 2.5 ms step of LTAO at 8.2 m, and its power of the diameter
+(1.24 ms at 4.2 m, 5.36 at 8.2, 35-75 at 16 m measured: docs/performance.md)."""
+IMAGING_SHARE = 0.45
+"""The science path's share of a step (propagation, DM surface, image; 8.2 m): what a replay redoes."""
+RUNTIME_MARGIN = 3.0
+"""Wall time declared over the estimate: a loaded node, a slower core."""
+
+
+def simulate_minutes(case: dict) -> int:
+    """A simulation's wall time to declare [min]: at least the 60 measured at paper fidelity
+    on 4.2 m, else :data:`RUNTIME_MARGIN` x its steps at :data:`STEP_MS_8M` (D / 8.2 m)^b."""
+    step_ms = STEP_MS_8M * (case["telescope"]["diameter_m"] / 8.2) ** STEP_EXPONENT
+    return max(60, math.ceil(RUNTIME_MARGIN * FrameClock.from_config(case).n_steps * step_ms / 6e4))
+
+
+def lucky_minutes(settings: dict) -> int:
+    """A lucky job's wall time to declare [min]: at least the 30 measured at paper fidelity on
+    4.2 m; replaying its frames, :data:`RUNTIME_MARGIN` x the science path once per pass (3 with
+    noisy detectors, else 2) per target."""
+    case = settings["case_config"]
+    if not settings.get("replay_frames", False):
+        return 30
+    noisy = any(d["photons_per_frame"] is not None for d in settings["detectors"].values())
+    step_ms = IMAGING_SHARE * STEP_MS_8M * (case["telescope"]["diameter_m"] / 8.2) ** STEP_EXPONENT
+    steps = FrameClock.from_config(case).n_steps * len(case["targets_arcsec"]) * (3 if noisy else 2)
+    return max(30, math.ceil(RUNTIME_MARGIN * steps * step_ms / 6e4))
+
+
 def mem_mb(estimate_bytes: float, measured_mb: int = 0, margin: float = MARGIN) -> int:
     """A rule's declared memory [MB]: the estimate x ``margin``, at least ``measured_mb``
     (the rule's measured need at paper fidelity), rounded up to 100 MB."""
