@@ -35,7 +35,6 @@ def test_cases_fall_into_series_by_ao_and_beacons(figure):
         "no AO",
         "LTAO, LGS 22 km",
         "LTAO, LGS 90 km",
-        "LTAO, LGS 22 km, asterism x D",
         "LTAO, LGS 90 km, asterism x D",
     ]
     assert ds.case.sel(series="LTAO, LGS 90 km", diameter=4.2).item() == "ltao_sodium_D4.2m"
