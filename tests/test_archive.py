@@ -38,6 +38,9 @@ def no_lgs_study() -> dict:
     study["figures"] = {fig: f for fig, f in study["figures"].items() if set(f.get("cases", [])) <= cheap}
     shown = {case for f in study["figures"].values() for case in f.get("cases", [])}
     study["cases"] = {name: case for name, case in study["cases"].items() if name in shown}
+    study["lucky"]["detector_sweep"]["cases"] = [
+        name for name in study["lucky"]["detector_sweep"]["cases"] if name in shown
+    ]
     assert study["figures"] and study["cases"]
     return study
 

@@ -70,6 +70,7 @@ def study_copy(tmp_path_factory):
     study = yaml.safe_load(TINY.read_text())
     study["keep_frames"] = True
     study["cases"] = {"good": study["cases"]["good"]}
+    study["lucky"]["detector_sweep"]["cases"] = []
     study["figures"] = {
         "quality": dict(study["figures"]["quality"], cases=["good"]),
         "longexp": dict(study["figures"]["longexp"], cases=["good"]),

@@ -85,6 +85,7 @@ def sized_case(diameter_m: float, n_steps: int) -> dict:
     studyspec/scaling.py): one ground layer at r0 = 13.5 cm moving D/4 per step."""
     speed_m_s = diameter_m / STEPS_PER_DIAMETER / 0.0025
     config = load_study(CONFIG)[0]
+    config["lucky"]["detector_sweep"]["cases"] = []
     config["cases"] = {
         "sized": {
             "telescope": {"diameter_m": diameter_m},

@@ -4,6 +4,7 @@ tomography prior following the case's r0, screens as long as their longest case,
 ``luckyao show``."""
 
 import json
+import re
 import subprocess
 import sys
 
@@ -11,6 +12,7 @@ import pytest
 import yaml
 
 from luckyao.figures.settings import CaseSummary
+from luckyao.io.hashing import sha256
 from luckyao.studyspec.case import Case
 from luckyao.studyspec.overrides import parse_overrides, typed
 from luckyao.studyspec.schema import ConfigError, deep_merge
@@ -34,6 +36,22 @@ def test_the_shipped_configs_keep_their_keys():
     assert case.reconstructor.key == "reconstructor_22060f27bd2e"  # the 13.5 cm prior, pinned
     assert case.slopes.key == "slopes_ca254bcc5dc5"
     assert view.cases["noao_r0_15cm"].lgs_twin == "ltao_r0_15cm"
+
+
+@pytest.mark.parametrize(
+    "overlay, case, lucky_sha256",
+    [
+        (None, "ltao_r0_13.5cm", "13fd59ebbeb1f5a2"),  # the sweep, from lucky.detector_sweep.cases
+        (None, "glao_r0_13.5cm", "f4557aeb3f6b1982"),  # none
+        ("diameter.yaml", "ltao_r0_13.5cm", "ce18bb9d2370f49a"),
+        ("diameter.yaml", "ltao_D16m", "c9a4e3e82da3aa66"),
+    ],
+)
+def test_the_detector_sweep_as_a_config_field_keeps_the_lucky_hashes(overlay, case, lucky_sha256):
+    """Each case's lucky settings hash as when the sweep was given by the figures that draw it."""
+    paths = [REPO / "config" / "config.yaml"] + ([REPO / "config" / overlay] if overlay else [])
+    study, _ = load_study(*paths)
+    assert sha256(view_of(study).cases[case].lucky_settings)[:16] == lucky_sha256
 
 
 def test_overrides_are_typed_as_yaml():
@@ -117,6 +135,11 @@ def test_show_names_the_derived_keys():
         [sys.executable, "-m", "luckyao", "show", "mine", *words], cwd=REPO, capture_output=True, text=True
     ).stdout
     assert "wfs.n_subapertures = 15" in text and "following the case's r0" in text
+    assert all(job["time_s"] > 0 for job in report["jobs"])
+    jobs = text[text.index("jobs (estimated time and memory") : text.index("resolved config:")].splitlines()[1:]
+    assert len(jobs) == len(report["jobs"]) + 1  # and the total
+    assert all(re.search(r" \d+(\.\d)? (s|min|h) +\d+\.\d\d GB", line) for line in jobs[:-1]), jobs
+    assert "screens screens_" not in text and "calibration calibration_" not in text  # said once
 
 
 def _study_folder(tmp_path, study):

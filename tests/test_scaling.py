@@ -28,6 +28,7 @@ def resolve(study, override: dict) -> dict:
     config = copy.deepcopy(study[0])
     config["cases"] = {"x": override}
     config["figures"] = {}
+    config["lucky"]["detector_sweep"]["cases"] = []
     config.pop("sweeps", None)
     return validate_study(config)["x"]
 

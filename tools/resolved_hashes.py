@@ -18,6 +18,7 @@ STUDIES = {
     "diameter": ["config/config.yaml", "config/diameter.yaml"],
     "apodisation": ["config/config.yaml", "config/apodisation.yaml"],
     "uncalibrated": ["config/config.yaml", "config/uncalibrated.yaml"],
+    "tiny": ["tests/data/tiny.yaml"],
 }
 
 for label, paths in STUDIES.items():

@@ -24,7 +24,7 @@ from pathlib import Path
 
 import xarray as xr
 
-from .studyspec.lucky import SIGNAL_KINDS
+from .studyspec.lucky import sweep_cases
 from .studyspec.schema import ConfigError
 from .studyspec.study import load_study as _load_study
 from .studyspec.study import validate_study
@@ -118,16 +118,14 @@ def run_case(study: dict, case, name: str = "explore", workdir=None) -> xr.Datas
         name = case
     else:
         raise ConfigError(f"run_case: no case {case!r} in the study; give its name or a dict of overrides of base")
-    # the case alone, with the figures that change its post-processing (the detector sweep)
-    signal = {
-        f: dict(v, cases=[name])
-        for f, v in study.get("figures", {}).items()
-        if v["kind"] in SIGNAL_KINDS and name in v.get("cases", [])
-    }
+    # the case alone, with the detector sweep if the study gives it one
+    lucky = study["lucky"]
+    if "detector_sweep" in lucky:
+        lucky["detector_sweep"]["cases"] = [c for c in sweep_cases(lucky) if c == name]
     study = {
         **{k: v for k, v in study.items() if k != "sweeps"},
         "cases": {name: study["cases"][name]},
-        "figures": signal,
+        "figures": {},
     }
     view = resolve_study(study, validate_study(study))
     resolved = view.cases[name].config

@@ -368,7 +368,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser(
         "show",
         help="print a case fully resolved: every key (the derived ones named), the tomography prior, "
-        "the screens, the products and the jobs' estimated memory and disk",
+        "the screens, the products and the jobs' estimated time, memory and disk",
     )
     p.add_argument("case", help="a case of the study, or a new one (an override of base)")
     p.add_argument("overrides", nargs="*", help="key.path=value overrides (a case's key: of this case)")

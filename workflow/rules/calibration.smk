@@ -12,7 +12,7 @@ rule calibration:
     priority: 10  # before the screens: the simulations that use it wait for it
     threads: 1
     resources:
-        mem_mb=1500,
+        mem_mb=mem_mb(CALIBRATION_BYTES, margin=1.0),
         runtime=5,  # minutes
     params:
         spec=lambda w: canonical_json(CALIBRATION_BY_KEY[w.wkey]),

@@ -8,6 +8,7 @@ from luckyao.jobs.code_deps import step_sources
 from luckyao.io.datasets import atomic_path
 from luckyao.jobs.live_run import hold_shared
 from luckyao.jobs.resources import (
+    CALIBRATION_BYTES,
     StudyTooLarge,
     checked_study,
     commands_memory_bytes,

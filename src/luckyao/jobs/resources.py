@@ -33,6 +33,7 @@ import math
 import os
 import shutil
 from pathlib import Path
+from typing import NamedTuple
 
 from ..clock import FrameClock, frame_count
 from ..steps.screens import TurbulenceSpec, strip_specs
@@ -167,33 +168,101 @@ def lucky_memory_bytes(settings: dict) -> float:
     return 1.5e9 + 0.21e9 * pixels * len(settings["detectors"]) * methods + replay
 
 
+# Time estimates [s] of one job's work on one core of the measuring machine (docs/performance.md;
+# Python's start-up, 2-5 s a job, left out). The rules declare wall times from them.
+
 STEP_MS_8M, STEP_EXPONENT = 5.4, 2.8
 """One core's whole-loop ms per 2.5 ms step of LTAO at 8.2 m, and its power of the diameter
 (1.24 ms at 4.2 m, 5.36 at 8.2, 35-75 at 16 m measured: docs/performance.md)."""
 IMAGING_SHARE = 0.45
 """The science path's share of a step (propagation, DM surface, image; 8.2 m): what a replay redoes."""
+LGS_SHARE = 0.63
+"""The LGS chain's share of a step (4 beacons' propagation 0.52 and WFS 0.27 of the default AO
+case's 1.26 ms at 4.2 m): what a slopes product measures."""
+SCREENS_NS_PER_SAMPLE = 141.0
+"""One core's time per screen sample (the paper's 2.3e9 samples: 5.4 minutes of CPU)."""
+RECONSTRUCTOR_S_16, RECONSTRUCTOR_EXPONENT = 1.7, 1.33
+"""A reconstructor's build [s] for one target with 16x16 sub-apertures (8.2 m), and its power of
+the sub-apertures across (0.4 s at 4.2 m and 2.5 m measured; the pitch fixed)."""
+COMMANDS_S_17, COMMANDS_EXPONENT = 3.9, 2.94
+"""A command matrix's build [s] with 17x17 actuators (8.2 m), and its power of the actuators
+across (0.4 s with 9x9, 0.1 with 6x6 measured)."""
+CALIBRATION_S = 13.0
+"""A WFS calibration [s]: the default study's six took 77 s, mostly numba compiling the WFS
+kernels of each size the first time (cached later)."""
+LUCKY_FRAME_MS = 0.9
+"""A lucky job's ms per frame and target with the noiseless detector and ``cog`` alone, 256
+pixels (22.8 s for 25,000 frames and 10 blocks)."""
+NOISY_FRAME_MS = 1.24
+"""More per frame and noisy detector, ``cog`` (the detector-sweep case: 579 s for 18 noisy
+detectors and 25,000 frames)."""
+SUBPIXEL_FRAME_MS = 0.42
+"""More per frame, detector and sub-pixel registration method (the sweep case's three: 10.05
+minutes of its 19.7 for 19 detectors)."""
 RUNTIME_MARGIN = 3.0
 """Wall time declared over the estimate: a loaded node, a slower core."""
 
 
+def step_ms(case: dict) -> float:
+    """One core's whole-loop ms per time step at the case's diameter: :data:`STEP_MS_8M` (D / 8.2 m)^b."""
+    return STEP_MS_8M * (case["telescope"]["diameter_m"] / 8.2) ** STEP_EXPONENT
+
+
+def screens_seconds(spec: dict) -> float:
+    """Making the screens: :data:`SCREENS_NS_PER_SAMPLE` per sample, on the rule's threads."""
+    return SCREENS_NS_PER_SAMPLE * 1e-9 * sum(screens_samples(spec)) / TURBULENCE_THREADS
+
+
+def reconstructor_seconds(spec: dict) -> float:
+    """A reconstructor's build: :data:`RECONSTRUCTOR_S_16` per target, (sub-apertures / 16)^b."""
+    n_sub = spec["wfs"]["n_subapertures"]
+    return RECONSTRUCTOR_S_16 * len(spec["targets_arcsec"]) * (n_sub / 16) ** RECONSTRUCTOR_EXPONENT
+
+
+def commands_seconds(spec: dict) -> float:
+    """A command matrix's build: :data:`COMMANDS_S_17` (actuators / 17)^b."""
+    return COMMANDS_S_17 * (spec["ao"]["n_actuators"] / 17) ** COMMANDS_EXPONENT
+
+
+def slopes_seconds(case: dict) -> float:
+    """An LGS slopes product: the LGS chain (:data:`LGS_SHARE` of a step, per 4 beacons) at every step."""
+    beacons = case["lgs"]["n_beacons"] / 4
+    return FrameClock.from_config(case).n_steps * LGS_SHARE * beacons * step_ms(case) / 1e3
+
+
+def simulate_seconds(case: dict) -> float:
+    """A simulation: its steps at :func:`step_ms` (the whole loop: an AO case replaying its LGS
+    chain's slopes takes less)."""
+    return FrameClock.from_config(case).n_steps * step_ms(case) / 1e3
+
+
 def simulate_minutes(case: dict) -> int:
     """A simulation's wall time to declare [min]: at least the 60 measured at paper fidelity
-    on 4.2 m, else :data:`RUNTIME_MARGIN` x its steps at :data:`STEP_MS_8M` (D / 8.2 m)^b."""
-    step_ms = STEP_MS_8M * (case["telescope"]["diameter_m"] / 8.2) ** STEP_EXPONENT
-    return max(60, math.ceil(RUNTIME_MARGIN * FrameClock.from_config(case).n_steps * step_ms / 6e4))
+    on 4.2 m, else :data:`RUNTIME_MARGIN` x :func:`simulate_seconds`."""
+    return max(60, math.ceil(RUNTIME_MARGIN * simulate_seconds(case) / 60))
+
+
+def lucky_seconds(settings: dict) -> float:
+    """A lucky job: every target's frames through its detectors and registration methods
+    (:data:`LUCKY_FRAME_MS`, :data:`NOISY_FRAME_MS`, :data:`SUBPIXEL_FRAME_MS`, as the camera's
+    pixels), and each target the simulation did not image (all with ``replay_frames``) made
+    again: its science path (:data:`IMAGING_SHARE` of a step) once per pass over the frames, 3
+    with noisy detectors, else 2."""
+    case, detectors = settings["case_config"], settings["detectors"]
+    noisy = sum(d["photons_per_frame"] is not None for d in detectors.values())
+    subpixel = sum(name != "cog" for name in registrations(settings))
+    frame_ms = LUCKY_FRAME_MS + NOISY_FRAME_MS * noisy + SUBPIXEL_FRAME_MS * subpixel * len(detectors)
+    targets = len(case["targets_arcsec"])
+    frames_s = frame_count(case) * targets * (case["camera"]["n_pixels"] / 256) ** 2 * frame_ms / 1e3
+    replayed = targets if settings.get("replay_frames", False) else targets - len(imaged_targets(case))
+    steps = FrameClock.from_config(case).n_steps * replayed * (3 if noisy else 2)
+    return frames_s + steps * IMAGING_SHARE * step_ms(case) / 1e3
 
 
 def lucky_minutes(settings: dict) -> int:
     """A lucky job's wall time to declare [min]: at least the 30 measured at paper fidelity on
-    4.2 m; replaying its frames, :data:`RUNTIME_MARGIN` x the science path once per pass (3 with
-    noisy detectors, else 2) per target."""
-    case = settings["case_config"]
-    if not settings.get("replay_frames", False):
-        return 30
-    noisy = any(d["photons_per_frame"] is not None for d in settings["detectors"].values())
-    step_ms = IMAGING_SHARE * STEP_MS_8M * (case["telescope"]["diameter_m"] / 8.2) ** STEP_EXPONENT
-    steps = FrameClock.from_config(case).n_steps * len(case["targets_arcsec"]) * (3 if noisy else 2)
-    return max(30, math.ceil(RUNTIME_MARGIN * steps * step_ms / 6e4))
+    4.2 m, else :data:`RUNTIME_MARGIN` x :func:`lucky_seconds`."""
+    return max(30, math.ceil(RUNTIME_MARGIN * lucky_seconds(settings) / 60))
 
 
 def mem_mb(estimate_bytes: float, measured_mb: int = 0, margin: float = MARGIN) -> int:
@@ -202,13 +271,31 @@ def mem_mb(estimate_bytes: float, measured_mb: int = 0, margin: float = MARGIN) 
     return max(measured_mb, 100 * math.ceil(margin * estimate_bytes / 1e8))
 
 
-def study_jobs(view: ResolvedStudy) -> list[tuple[str, str, float, str | None, float]]:
-    """(job, the first case it serves, memory estimate, output file or None, its size) of
-    every job of a resolved study."""
+class Job(NamedTuple):
+    """One job of a study, from its config: what :func:`preflight` checks and ``luckyao show`` prints."""
+
+    name: str
+    """``<step> <key or case>``, e.g. ``simulate ltao_r0_13.5cm``."""
+    case: str
+    """The first case it serves."""
+    memory_bytes: float
+    output: str | None
+    """The file it writes that the pre-flight counts, or None."""
+    output_bytes: float
+    seconds: float
+    """Its estimated time on one core (the ``*_seconds`` functions)."""
+
+
+CALIBRATION_BYTES = 1.5e9
+"""A WFS calibration's memory: what its rule declares (small sensors; not measured apart)."""
+
+
+def study_jobs(view: ResolvedStudy) -> list[Job]:
+    """Every job of a resolved study, once (a product shared by cases: its first case)."""
     jobs = {}
 
-    def add(job, *values):
-        jobs.setdefault(job, values)
+    def add(name, *values):
+        jobs.setdefault(name, Job(name, *values))
 
     for name, resolved in view.cases.items():
         case, screens = resolved.config, resolved.screens
@@ -218,7 +305,10 @@ def study_jobs(view: ResolvedStudy) -> list[tuple[str, str, float, str | None, f
             turbulence_memory_bytes(screens.spec),
             screens.samples_path,
             screens_bytes(screens.spec),
+            screens_seconds(screens.spec),
         )
+        if (product := resolved.calibration) is not None:
+            add(f"calibration {product.key}", name, CALIBRATION_BYTES, None, 0.0, CALIBRATION_S)
         if (product := resolved.reconstructor) is not None:
             add(
                 f"reconstructor {product.key}",
@@ -226,6 +316,7 @@ def study_jobs(view: ResolvedStudy) -> list[tuple[str, str, float, str | None, f
                 reconstructor_memory_bytes(product.spec),
                 product.path,
                 reconstructor_bytes(product.spec),
+                reconstructor_seconds(product.spec),
             )
         if (product := resolved.commands) is not None:
             add(
@@ -234,16 +325,25 @@ def study_jobs(view: ResolvedStudy) -> list[tuple[str, str, float, str | None, f
                 commands_memory_bytes(product.spec),
                 product.path,
                 commands_bytes(product.spec),
+                commands_seconds(product.spec),
             )
         if (product := resolved.slopes) is not None:
-            add(f"slopes {product.key}", name, slopes_memory_bytes(case), product.path, slopes_bytes(case))
+            add(
+                f"slopes {product.key}",
+                name,
+                slopes_memory_bytes(case),
+                product.path,
+                slopes_bytes(case),
+                slopes_seconds(case),
+            )
         if view.config.get("replay_frames", False):  # no cube: the telemetry is the simulation's file
             output, size = f"results/cases/{name}/telemetry.nc", telemetry_bytes(case)
         else:
             output, size = f"results/cases/{name}/frames.nc", frames_bytes(case)
-        add(f"simulate {name}", name, simulate_memory_bytes(case), output, size)
-        add(f"lucky {name}", name, lucky_memory_bytes(resolved.lucky_settings), None, 0.0)
-    return [(job, *values) for job, values in jobs.items()]
+        add(f"simulate {name}", name, simulate_memory_bytes(case), output, size, simulate_seconds(case))
+        settings = resolved.lucky_settings
+        add(f"lucky {name}", name, lucky_memory_bytes(settings), None, 0.0, lucky_seconds(settings))
+    return list(jobs.values())
 
 
 def machine_memory_bytes() -> float:
@@ -267,7 +367,7 @@ def preflight(view: ResolvedStudy, folder=".", memory_bytes: float | None = None
     memory_bytes = memory_bytes or machine_memory_bytes()
     free_bytes = shutil.disk_usage(folder).free
     problems, pending = [], []
-    for job, case, memory, output, size in study_jobs(view):
+    for job, case, memory, output, size, _ in study_jobs(view):
         if memory > memory_bytes:
             key = "turbulence" if job.startswith("turbulence ") else f"cases.{case}"  # screens: of every case
             problems.append(

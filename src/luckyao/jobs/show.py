@@ -1,6 +1,6 @@
 """A case fully resolved, for ``luckyao show``: its keys (the derived ones named), what differs
-from ``base``, the tomography prior, the screens, the products and its jobs' estimated memory
-and files (:mod:`.resources`), as a dict (``--json``) or as text."""
+from ``base``, the tomography prior, the screens, the products and its jobs' estimated time,
+memory and files (:mod:`.resources`), as a dict (``--json``) or as text."""
 
 from ..studyspec.scaling import DERIVED_KEYS, PRIOR_KEY
 from ..studyspec.view import ResolvedStudy, flat
@@ -13,9 +13,15 @@ def case_report(view: ResolvedStudy, name: str) -> dict:
     sources = {**DERIVED_KEYS, PRIOR_KEY: "atmosphere.r0_500nm_m"}
     prior = case.config["tomography"]["prior_r0_500nm_m"]
     jobs = [
-        {"job": job, "memory_gb": round(memory / 1e9, 3), "file": output, "file_gb": round(size / 1e9, 3)}
-        for job, _, memory, output, size in study_jobs(view)
-        if job in _jobs_of(view, name)
+        {
+            "job": job.name,
+            "time_s": round(job.seconds, 1),
+            "memory_gb": round(job.memory_bytes / 1e9, 3),
+            "file": job.output,
+            "file_gb": round(job.output_bytes / 1e9, 3),
+        }
+        for job in study_jobs(view)
+        if job.name in _jobs_of(view, name)
     ]
     return {
         "case": name,
@@ -93,18 +99,35 @@ def case_text(report: dict) -> str:
             if prior["r0_500nm_m"] != prior["case_r0_500nm_m"]
             else ""
         ),
-        f"screens {screens['key']}: {screens['duration_s']:g} s, {len(screens['samples_per_layer'])} layers, "
+        f"screens: {screens['key']}, {screens['duration_s']:g} s, {len(screens['samples_per_layer'])} layers, "
         f"{sum(screens['samples_per_layer']):,} samples, {screens['file_gb']:.3f} GB",
-        "products: " + ", ".join(f"{kind} {key}" for kind, key in report["products"].items()),
+        "products: " + ", ".join(report["products"].values()),
         f"LGS twin: {report['lgs_twin'] or 'none'}",
         f"detectors: {', '.join(report['detectors'])}; registration: {', '.join(report['registrations'])}",
-        "jobs (estimated memory; file written):",
+        "jobs (estimated time and memory; file written):",
         *(
-            f"  {job['job']:<40} {job['memory_gb']:7.2f} GB"
+            f"  {_job_text(job['job']):<40} {_duration(job['time_s']):>8} {job['memory_gb']:7.2f} GB"
             + (f"   {job['file']} {job['file_gb']:.3f} GB" if job["file"] else "")
             for job in report["jobs"]
         ),
+        f"  {'all':<40} {_duration(sum(job['time_s'] for job in report['jobs'])):>8}",
         "resolved config:",
         *(f"  {path} = {value}" for path, value in report["config"].items()),
     ]
     return "\n".join(lines)
+
+
+def _job_text(job: str) -> str:
+    """A job as ``show`` writes it: a product's key alone where it names the step
+    (``commands_2e6f...``, not ``commands commands_2e6f...``)."""
+    step, _, what = job.partition(" ")
+    return what if what.startswith(f"{step}_") else job
+
+
+def _duration(seconds: float) -> str:
+    """``42 s``, ``12.5 min`` or ``3.2 h``."""
+    if seconds < 90:
+        return f"{seconds:.0f} s"
+    if seconds < 5400:
+        return f"{seconds / 60:.1f} min"
+    return f"{seconds / 3600:.1f} h"

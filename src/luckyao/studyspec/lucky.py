@@ -6,7 +6,8 @@ import numpy as np
 from .schema import load_schema
 
 SIGNAL_KINDS = ("quality_vs_signal", "registration", "limiting_magnitude")
-"""The figure kinds drawn against the detector sweep: their cases get it and every registration method."""
+"""The figure kinds drawn against the detector sweep: each case they draw must be one of
+``lucky.detector_sweep.cases`` (``study.validate_study``)."""
 
 
 def _lucky_value(lucky: dict, key: str):
@@ -60,20 +61,31 @@ def sweep_detectors(lucky: dict) -> dict:
     return dict(sweep_detector_list(lucky))
 
 
+def sweep_cases(lucky: dict) -> list[str]:
+    """The cases given the detector sweep and every registration method:
+    ``lucky.detector_sweep.cases``, by default the schema's (none); none without a sweep."""
+    sweep = lucky.get("detector_sweep")
+    if sweep is None:
+        return []
+    default = load_schema()["properties"]["lucky"]["properties"]["detector_sweep"]["properties"]["cases"]["default"]
+    return list(sweep.get("cases", default))
+
+
 def sweep_name(read_noise_e: float, photons_per_frame: float) -> str:
     return f"rn{read_noise_e:g}_{photons_per_frame:.3g}ph"
 
 
 def lucky_settings(study: dict, cases: dict, case_name: str) -> dict:
     """The post-processing settings one case's lucky job uses, with its resolved config:
-    every listed detector, and the detector sweep and every registration method when a
-    ``quality_vs_signal`` or ``registration`` figure shows the case (their cost goes only where
-    they are drawn; elsewhere ``cog`` alone); with ``replay_frames``, the flag that every
-    target's frames are made again from the screens (no cube)."""
+    every listed detector, and the detector sweep and every registration method when the case
+    is one of ``lucky.detector_sweep.cases`` (:func:`sweep_cases`: their cost goes only where
+    the config asks; elsewhere ``cog`` alone), whatever figures the study draws; with
+    ``replay_frames``, the flag that every target's frames are made again from the screens (no
+    cube)."""
     lucky = {key: value for key, value in study["lucky"].items() if key not in ("detector_sweep", "registration")}
     lucky["error_blocks"] = error_blocks(study["lucky"])
     lucky["registration"] = ["cog"]
-    if any(f["kind"] in SIGNAL_KINDS and case_name in f["cases"] for f in study["figures"].values()):
+    if case_name in sweep_cases(study["lucky"]):
         lucky["detectors"] = {**lucky["detectors"], **sweep_detectors(study["lucky"])}
         lucky["registration"] = registrations(study["lucky"])
     if study.get("replay_frames", False):  # only when set: the settings (and their hash) of a stored cube unchanged

@@ -6,7 +6,7 @@ the first problem of each case and figure is reported as a ``ConfigError`` namin
 """
 
 from ..clock import frame_count
-from .lucky import MAX_SWEEP_DETECTORS, SIGNAL_KINDS, error_blocks, sweep_detector_list
+from .lucky import MAX_SWEEP_DETECTORS, SIGNAL_KINDS, error_blocks, sweep_cases, sweep_detector_list
 from .resolved import criteria_of
 from .scaling import PRIOR_KEY, derived_case
 from .schema import ConfigError, check_finite, deep_merge, load_schema, validate_keys
@@ -94,6 +94,11 @@ def validate_study(config: dict, schema: dict | None = None) -> dict:
         _check_detectors(config["lucky"])
     except ConfigError as err:
         problems.append(str(err))
+    problems += [
+        f"config key 'lucky.detector_sweep.cases': unknown case '{name}'"
+        for name in sweep_cases(config["lucky"])
+        if name not in config["cases"]
+    ]
     for name, override in config["cases"].items():
         resolved = deep_merge(config["base"], override)
         try:
@@ -264,6 +269,12 @@ def _check_figure(fig_id: str, figure: dict, cases: dict, config: dict) -> None:
         for key in ("criteria", "fractions", "read_noise_e") + (("metric",) if kind == "quality_vs_signal" else ()):
             if key not in figure:
                 raise ConfigError(f"config key 'figures.{fig_id}.{key}': required for {kind}")
+        for case in figure["cases"]:
+            if case not in sweep_cases(config["lucky"]):
+                raise ConfigError(
+                    f"config key 'lucky.detector_sweep.cases': case '{case}' is not one, but the {kind} "
+                    f"figure '{fig_id}' draws its detector sweep: add it there (or take it off the figure)"
+                )
         missing = set(figure["read_noise_e"]) - set(sweep["read_noise_e"])
         if missing:
             raise ConfigError(

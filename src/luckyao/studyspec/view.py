@@ -113,7 +113,7 @@ class ResolvedCase:
 
     @property
     def detectors(self) -> tuple[str, ...]:
-        """The detectors its lucky job applies (the detector sweep's too when a noise figure draws it)."""
+        """The detectors its lucky job applies (the sweep's too when ``lucky.detector_sweep.cases`` lists it)."""
         return tuple(self.lucky_settings["detectors"])
 
     @property
