@@ -141,3 +141,30 @@ def test_off_axis_target_is_selected_and_recentred_by_the_star(field, runs):
     # its own Strehl would select other frames (the reference is what changes the result)
     own = np.argsort(-strehl(all_frames[2], 1e-2), kind="stable")[: len(best)]
     assert set(own) != set(best)
+
+
+def test_lucky_imaging_of_replayed_frames_is_that_of_the_stored_frames(field, runs):
+    """Without a cube (``replay_frames``) every pass over a target's frames replays them: the
+    lucky result of an AO target, a noisy and a noiseless detector, time blocks (3 passes) is bit
+    for bit that of the stored frames read in chunks of the same size (the pipeline's guesses
+    follow the chunking: ``postprocess.CHUNK_FRAMES`` for both)."""
+    (telemetry, all_frames), _ = runs
+    n_frames = all_frames.shape[1]
+    args = dict(
+        detectors=[Detector("noiseless"), Detector("faint", 300.0, 0.1)],
+        fractions=[0.25, 1.0],
+        diffraction_limited_peak=1e-2,
+        pixel_scale_arcsec=field.case.camera.pixel_scale_arcsec,
+        seed=1,
+        n_blocks=4,
+    )
+    replay = Replay(field.case, field.screens, [1], telemetry.dm_commands_m.values, block_frames=9)
+    passes = []
+
+    def replayed():
+        passes.append(1)
+        return ((start, frames[0]) for start, frames in replay())
+
+    stored = run_lucky(lambda: ((s, all_frames[1, s : s + 9]) for s in range(0, n_frames, 9)), n_frames, **args)
+    assert run_lucky(replayed, n_frames, **args).identical(stored)
+    assert len(passes) == 3  # the noiseless frames, the detected ones, the ones guessed wrong

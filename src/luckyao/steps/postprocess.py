@@ -32,6 +32,11 @@ EXTERNAL_CRITERIA = (
 also the oracle ``true_rms``, the true corrected tilt-removed rms (a bound, not observable)."""
 
 
+CHUNK_FRAMES = 64
+"""Frames per chunk fed to the lucky pipeline, read from a cube or replayed alike: its guessed bins
+(and so which noisy frames are drawn again, their sums to float64 rounding) follow the chunking."""
+
+
 def _frames_of(
     settings: LuckySettings, telemetry: xr.Dataset, target: int, frames_path, screens_path, screens_metadata_path
 ):
@@ -39,11 +44,11 @@ def _frames_of(
     the recorded DM commands (:class:`.simulation.Replay`, whose values on the axis the caller
     reads once they are made); the replay, or None."""
     if target in settings.imaged_targets:
-        return iter_frame_blocks(frames_path, target), None
+        return iter_frame_blocks(frames_path, target, CHUNK_FRAMES), None
     if not screens_path:
         raise ValueError(f"target {target} was not imaged by the simulation: its replay needs the screens")
     commands = telemetry["dm_commands_m"].values if "dm_commands_m" in telemetry else None
-    replay = Replay(settings.case, read_screens(screens_path, screens_metadata_path), [target], commands)
+    replay = Replay(settings.case, read_screens(screens_path, screens_metadata_path), [target], commands, CHUNK_FRAMES)
 
     def iterate():
         for start, frames in replay():
