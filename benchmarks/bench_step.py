@@ -203,8 +203,13 @@ def peak_rss_gb() -> float:
 def sized_study(config_path: str, diameter_m: float) -> tuple[dict, dict]:
     """The study and the default AO case at ``diameter_m`` (size-dependent keys derived)."""
     study, _ = load_study(config_path)
+    sweep = dict(study["lucky"]["detector_sweep"], cases=[])  # the study's sweep cases are not here
     sized = dict(
-        study, cases={"sized": {"telescope": {"diameter_m": diameter_m}, "ao": {"mode": "ltao"}}}, figures={}, sweeps={}
+        study,
+        cases={"sized": {"telescope": {"diameter_m": diameter_m}, "ao": {"mode": "ltao"}}},
+        figures={},
+        sweeps={},
+        lucky=dict(study["lucky"], detector_sweep=sweep),
     )
     return study, validate_study(sized)["sized"]
 
