@@ -8,7 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 import xarray as xr
 from matplotlib.figure import Figure
-from matplotlib.ticker import FuncFormatter, NullFormatter
+from matplotlib.ticker import LogFormatter
 
 PALETTE = ("#004488", "#E69F00", "#000000", "#BB5566", "#CC3311", "#228833", "#882255", "#4477AA")
 """Dark blue, orange, black, rose (Tol's high-contrast scheme with Okabe & Ito's orange), then
@@ -62,10 +62,11 @@ def parameter(key: str) -> Parameter:
 
 
 def fraction_axis(ax) -> None:
-    """The fraction of frames selected on a log x axis in percent, ticks read 1, 10, 100."""
+    """The fraction of frames selected on a log x axis in percent, ticks read 1, 10, 100 (and
+    20, 30, 40... on an axis short of a decade)."""
     ax.set_xscale("log")
-    ax.xaxis.set_major_formatter(FuncFormatter(lambda value, _: f"{value:g}"))
-    ax.xaxis.set_minor_formatter(NullFormatter())
+    ax.xaxis.set_major_formatter(LogFormatter())
+    ax.xaxis.set_minor_formatter(LogFormatter(labelOnlyBase=False))
     ax.set_xlabel("frames selected [%]")
 
 
