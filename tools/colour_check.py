@@ -23,7 +23,8 @@ from luckyao.figures.colour_vision import DISTINCT_DE00, MACHADO_2009, VISIONS, 
 from luckyao.figures.style import PALETTE
 
 MIN_PIXELS = 100
-"""A palette colour counts as drawn when at least this many pixels have it exactly."""
+"""A palette colour counts as drawn when at least this many pixels have it exactly (black,
+the palette's third colour, always does: the text is black)."""
 
 
 def palette_colours(image: np.ndarray) -> list[str]:
