@@ -61,11 +61,17 @@ API_MODULES = {
         "luckyao.steps.postprocess",
     ],
     "Input and output": ["luckyao.io.datasets", "luckyao.io.fits", "luckyao.io.hashing", "luckyao.io.kinds"],
-    "Figures": ["luckyao.figures", "luckyao.figures.settings", "luckyao.figures.style"],
+    "Figures": [
+        "luckyao.figures",
+        "luckyao.figures.settings",
+        "luckyao.figures.style",
+        "luckyao.figures.colour_vision",
+    ],
     "Workflow infrastructure": [
         "luckyao.jobs.code_deps",
         "luckyao.jobs.resources",
         "luckyao.jobs.live_run",
+        "luckyao.jobs.progress",
         "luckyao.jobs.report",
     ],
     "Archive and verify": ["luckyao.archive.create", "luckyao.archive.verify"],

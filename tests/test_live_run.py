@@ -75,6 +75,7 @@ def test_the_study_command_leaves_a_live_run_alone(tmp_path, how):
         assert planted.exists(), "the live job's file was deleted"
         assert any(locks.iterdir()), "the live run's lock was removed"
         assert "is using" in result.stderr
+        assert "    input: " not in result.stderr, "the study's terminal lists each job's inputs"
     finally:
         os.killpg(live.pid, signal.SIGKILL)
         live.wait()

@@ -40,6 +40,7 @@ from .quality import (
 from .registration import draw_registration, registration_data
 from .settings import CaseSummary, FigureSettings
 from .signal import draw_quality_vs_signal, quality_vs_signal_data
+from .style import DPI
 from .tables import (
     draw_long_exposure_check,
     draw_long_exposure_table,
@@ -97,7 +98,7 @@ def draw_figure(fig_id: str, settings: dict, lucky_paths, out_prefix: str) -> No
     write_dataset(ds, f"{out_prefix}.nc", allow_nan=set(ds.data_vars))  # drawn data; inputs are checked
     fig = draw(open_dataset(f"{out_prefix}.nc", "figure data"), fig_id)
     for ext in ("pdf", "png"):
-        fig.savefig(f"{out_prefix}.{ext}", dpi=150)
+        fig.savefig(f"{out_prefix}.{ext}", dpi=DPI)
     Path(f"{out_prefix}.html").write_text(figure_page(fig_id, Path(f"{out_prefix}.png").read_bytes()))
     log.info("figure %s written", fig_id)
 

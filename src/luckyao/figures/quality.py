@@ -14,7 +14,9 @@ from .style import (
     METRICS,
     band,
     colour,
+    fraction_axis,
     new_figure,
+    parameter,
     series_fraction_lines,
     with_error,
 )
@@ -88,8 +90,10 @@ def quality_vs_fraction_data(settings: FigureSettings, datasets) -> xr.Dataset:
 
 
 def _case_style(ds: xr.Dataset, case) -> dict:
+    """A case's colour and marker by its place in the figure, its line style by its AO mode."""
     row = ds.sel(case=case)
-    return {"color": colour(int(row.colour)), "ls": AO_STYLE[str(row.ao_mode.values)]}
+    k = int(row.colour)
+    return {"color": colour(k), "marker": MARKERS[k % len(MARKERS)], "ls": AO_STYLE[str(row.ao_mode.values)]}
 
 
 def _legend_note(ds: xr.Dataset) -> str:
@@ -104,33 +108,79 @@ def _legend_note(ds: xr.Dataset) -> str:
     )
 
 
+COINCIDE_RTOL = 1e-5
+"""Curves whose every value agrees to this relative difference (far below a pixel) coincide:
+drawn once, the legend naming them all."""
+
+
+def coinciding_cases(ds: xr.Dataset) -> list[list]:
+    """The cases of a figure's dataset (one panel row's selection) in groups whose curves
+    coincide (:data:`COINCIDE_RTOL`, every data variable), in the figure's order."""
+    groups: list[list] = []
+    for case in ds.case.values:
+        row = ds.sel(case=case)
+        for group in groups:
+            first = ds.sel(case=group[0])
+            if all(
+                np.allclose(row[v].values, first[v].values, rtol=COINCIDE_RTOL, atol=0.0, equal_nan=True)
+                for v in ds.data_vars
+            ):
+                group.append(case)
+                break
+        else:
+            groups.append([case])
+    return groups
+
+
+def coinciding_label(labels: list[str]) -> str:
+    """One legend label for coinciding curves: what their labels share, then what differs,
+    ``no AO, 8x8 WFS = 16x16 WFS = 32x32 WFS (identical)``."""
+    if len(labels) == 1:
+        return labels[0]
+    parts = [label.split(", ") for label in labels]
+    shared = [p for p in parts[0] if all(p in other for other in parts)]
+    differ = [", ".join(p for p in part if p not in shared) or "all" for part in parts]
+    return ", ".join(shared + [" = ".join(differ)]) + " (identical)"
+
+
 def draw_quality_vs_fraction(ds: xr.Dataset, title: str):
     n_rows = ds.sizes["criterion"]
     fig = new_figure(13, 3.6 * n_rows + 0.9)
     axes = fig.subplots(n_rows, 3, squeeze=False)
     x = 100 * ds.fraction.values
+    merged = False
     for r, criterion in enumerate(ds.criterion.values):
+        panel = ds.sel(criterion=criterion)
+        groups = coinciding_cases(panel)
+        merged |= any(len(group) > 1 for group in groups)
         for ax, metric in zip(axes[r], METRICS):
-            for case in ds.case.values:
-                row, style = ds.sel(case=case, criterion=criterion), _case_style(ds, case)
-                ax.plot(x, _drawn(row, metric), marker="o", ms=3, label=str(row.label.values), **style)
+            for group in groups:
+                row, style = panel.sel(case=group[0]), _case_style(ds, group[0])
+                label = coinciding_label([str(panel.label.sel(case=c).values) for c in group])
+                ax.plot(x, _drawn(row, metric), ms=3.5, label=label, **style)
                 band(ax, x, row, metric, style["color"])
                 if metric == "strehl":
                     ax.axhline(
                         float(row.long_exposure_strehl.sel(recentring="none")), lw=0.8, color=style["color"], ls=":"
                     )
-            ax.set_xscale("log")
-            ax.set_xlabel("frames selected [%]")
+            fraction_axis(ax)
             ax.set_ylabel(METRICS[metric])
             ax.grid(alpha=0.3)
         letter = f"({chr(ord('a') + r)}) " if n_rows > 1 else ""
         axes[r, 0].set_title(f"{letter}selection by {CRITERIA.get(criterion, criterion)}", loc="left", fontsize=10)
+    handles = {}
+    for ax in axes[:, 0]:  # every row's curves, a coinciding group said once
+        for handle, label in zip(*ax.get_legend_handles_labels()):
+            handles.setdefault(label, handle)
     fig.legend(
-        *axes[0, 0].get_legend_handles_labels(),
+        handles.values(),
+        handles.keys(),
         loc="outside lower center",
         ncol=4,
         fontsize=8,
-        title="colour: case; dotted: long exposure (no recentring)\nbands: ±1 Monte-Carlo standard error"
+        title="colour and marker: case; line style: AO (solid LTAO, dash-dot GLAO, dashed none); dotted: long "
+        "exposure (no recentring)\nbands: ±1 Monte-Carlo standard error"
+        + ("; identical: curves that coincide in a row, drawn once" if merged else "")
         + _legend_note(ds),
         title_fontsize=8,
     )
@@ -323,13 +373,14 @@ def draw_quality_vs_parameter(ds: xr.Dataset, title: str):
     fig = new_figure(13 + 4 * flux, 3.6 * n_rows + 1.0)
     axes = fig.subplots(n_rows, 3 + flux, squeeze=False)
     numeric = ds.x.dtype.kind in "iuf"
-    x = ds.x.values if numeric else np.arange(ds.sizes["x"])
+    axis = parameter(ds.attrs["parameter"])
+    x = axis.scale * ds.x.values if numeric else np.arange(ds.sizes["x"])
     for r, criterion in enumerate(ds.criterion.values):
         for ax, metric in zip(axes[r], METRICS):
             series_fraction_lines(ax, x, ds.sel(criterion=criterion), metric)
             if not numeric:
                 ax.set_xticks(x, ds.x.values)
-            ax.set_xlabel(ds.attrs["parameter"])
+            ax.set_xlabel(axis.label())
             ax.set_ylabel(METRICS[metric])
             ax.grid(alpha=0.3)
         letter = f"({chr(ord('a') + r)}) " if n_rows > 1 else ""
@@ -350,7 +401,7 @@ def draw_quality_vs_parameter(ds: xr.Dataset, title: str):
                 capsize=2,
                 lw=1.2,
             )
-        ax.set_xlabel(ds.attrs["parameter"])
+        ax.set_xlabel(axis.label())
         ax.set_ylabel("flux lost (fraction of the source's)")
         ax.set_title("flux blocked by the apodisation", loc="left", fontsize=9)
         ax.grid(alpha=0.3)
@@ -364,8 +415,7 @@ def draw_quality_vs_parameter(ds: xr.Dataset, title: str):
         title_fontsize=8,
     )
     fig.suptitle(
-        f"{title}: integrated-image quality vs {ds.attrs['parameter']} (sweep {ds.attrs['sweep']}, "
-        f"{ds.attrs['detector']} detector)"
+        f"{title}: integrated-image quality vs {axis.name} (sweep {ds.attrs['sweep']}, {ds.attrs['detector']} detector)"
     )
     return fig
 
@@ -425,13 +475,12 @@ def draw_comparisons(ds: xr.Dataset, title: str):
     for ax, metric in zip(axes[0], METRICS):
         for k, pair in enumerate(ds.pair.values):
             row, shade = ds.sel(pair=pair), colour(k)
-            ax.plot(x, row[metric], marker="o", ms=3, color=shade, label=str(pair))
+            ax.plot(x, row[metric], marker=MARKERS[k % len(MARKERS)], ms=3.5, color=shade, label=str(pair))
             band(ax, x, row, metric, shade)
             for sign in (-1, 1):
                 ax.plot(x, row[metric] + sign * row[f"{metric}_unpaired_error"], color=shade, lw=0.6, ls=":")
         ax.axhline(0.0, color="k", lw=0.8)
-        ax.set_xscale("log")
-        ax.set_xlabel("frames selected [%]")
+        fraction_axis(ax)
         ax.set_ylabel(f"difference of {METRICS[metric]}")
         ax.grid(alpha=0.3)
     fig.legend(
@@ -439,7 +488,7 @@ def draw_comparisons(ds: xr.Dataset, title: str):
         loc="outside lower center",
         ncol=4,
         fontsize=8,
-        title="colour: difference a - b\nbands: paired ±1 standard error (time blocks, shared turbulence); "
+        title="colour and marker: difference a - b\nbands: paired ±1 standard error (time blocks, shared turbulence); "
         "dotted: unpaired ±1 standard error",
         title_fontsize=8,
     )

@@ -6,11 +6,11 @@ from dataclasses import replace
 
 import numpy as np
 import xarray as xr
-from matplotlib.ticker import FormatStrFormatter, NullFormatter
+from matplotlib.ticker import FormatStrFormatter, LogLocator, NullFormatter
 
 from .settings import FigureSettings
 from .signal import signal_data
-from .style import CRITERIA, LINE_STYLES, METRICS, colour, new_figure
+from .style import CRITERIA, LINE_STYLES, MARKERS, METRICS, colour, new_figure
 
 REGISTRATION_METRICS = ("strehl", "d50_arcsec")
 """The figure's metrics: the integrated image's Strehl and 50%-energy diameter."""
@@ -149,68 +149,70 @@ def knee_markdown(ds: xr.Dataset, fraction: float, criterion: str, read_noise: f
 
 
 def draw_registration(ds: xr.Dataset, title: str):
-    """Rows: metric x read noise; columns: cases; colour: registration method; line style:
-    selection criterion; the first fraction of the figure; I magnitude on the top axis."""
+    """Rows: metric; columns: case x read noise; colour and marker: registration method; line
+    style: selection criterion; the first fraction of the figure; I magnitude on the top axis."""
     fraction = float(ds.fraction.values[0])
-    n_rows, n_cols = len(REGISTRATION_METRICS) * ds.sizes["read_noise"], ds.sizes["case"]
-    fig = new_figure(4.6 * max(n_cols, 2), 3.2 * n_rows + 1.4)
+    columns = [(case, read_noise) for case in ds.case.values for read_noise in ds.read_noise.values]
+    n_rows, n_cols = len(REGISTRATION_METRICS), len(columns)
+    fig = new_figure(3.4 * n_cols, 3.2 * n_rows + 1.6)
     axes = fig.subplots(n_rows, n_cols, squeeze=False, sharex=True)
-    for m, metric in enumerate(REGISTRATION_METRICS):
-        for r, read_noise in enumerate(ds.read_noise.values):
-            row = m * ds.sizes["read_noise"] + r
-            for c, case in enumerate(ds.case.values):
-                ax = axes[row, c]
-                for k, method in enumerate(ds.registration.values):
-                    for s, criterion in enumerate(ds.criterion.values):
-                        cell = ds.sel(
-                            case=case,
-                            criterion=criterion,
-                            fraction=fraction,
-                            read_noise=read_noise,
-                            registration=method,
-                        )
-                        ax.plot(
-                            ds.signal,
-                            cell[f"{metric}_noiseless"].values,
-                            color=colour(k),
-                            ls=LINE_STYLES[s % 4],
-                            marker="o",
-                            ms=2.5,
-                            label=f"{method}, by {CRITERIA.get(criterion, criterion)}",
-                        )
-                        ax.axhline(
-                            float(cell[f"{metric}_noiseless_detector"]),
-                            color=colour(k),
-                            lw=0.5,
-                            ls=LINE_STYLES[s % 4],
-                            alpha=0.5,
-                        )
-                ax.set_xscale("log")
+    for row, metric in enumerate(REGISTRATION_METRICS):
+        for c, (case, read_noise) in enumerate(columns):
+            ax = axes[row, c]
+            for k, method in enumerate(ds.registration.values):
+                for s, criterion in enumerate(ds.criterion.values):
+                    cell = ds.sel(
+                        case=case,
+                        criterion=criterion,
+                        fraction=fraction,
+                        read_noise=read_noise,
+                        registration=method,
+                    )
+                    ax.plot(
+                        ds.signal,
+                        cell[f"{metric}_noiseless"].values,
+                        color=colour(k),
+                        ls=LINE_STYLES[s % 4],
+                        marker=MARKERS[k % len(MARKERS)],
+                        ms=3,
+                        label=f"{method}, by {CRITERIA.get(criterion, criterion)}",
+                    )
+                    ax.axhline(
+                        float(cell[f"{metric}_noiseless_detector"]),
+                        color=colour(k),
+                        lw=0.5,
+                        ls=LINE_STYLES[s % 4],
+                        alpha=0.5,
+                    )
+            ax.set_xscale("log")
+            if c == 0:
                 ax.set_ylabel(METRICS[metric])
-                if metric == "d50_arcsec":
-                    ax.set_yscale("log")
-                ax.set_title(
-                    f"({chr(ord('a') + row * n_cols + c)}) {ds.label.sel(case=case).values}, read noise "
-                    f"{read_noise:g} e-",
-                    loc="left",
-                    fontsize=9,
-                )
-                ax.grid(alpha=0.3)
-                top = ax.secondary_xaxis("top", functions=(i_magnitude, photons_per_frame))
-                magnitudes = i_magnitude(ds.signal.values[[-1, 0]])
-                top.set_xticks(np.arange(np.ceil(magnitudes[0]), np.floor(magnitudes[1]) + 1))
-                top.xaxis.set_major_formatter(FormatStrFormatter("%g"))
-                top.xaxis.set_minor_formatter(NullFormatter())
-                top.set_xlabel("I magnitude" if row == 0 else "")
+            if metric == "d50_arcsec":
+                ax.set_yscale("log")
+                ax.yaxis.set_major_locator(LogLocator(subs=(1.0, 2.0, 5.0)))
+                ax.yaxis.set_major_formatter(FormatStrFormatter("%g"))
+                ax.yaxis.set_minor_formatter(NullFormatter())
+            ax.set_title(
+                f"({chr(ord('a') + row * n_cols + c)}) {ds.label.sel(case=case).values},\nread noise {read_noise:g} e-",
+                loc="left",
+                fontsize=9,
+            )
+            ax.grid(alpha=0.3)
+            top = ax.secondary_xaxis("top", functions=(i_magnitude, photons_per_frame))
+            magnitudes = i_magnitude(ds.signal.values[[-1, 0]])
+            top.set_xticks(np.arange(np.ceil(magnitudes[0]), np.floor(magnitudes[1]) + 1, 2))
+            top.xaxis.set_major_formatter(FormatStrFormatter("%g"))
+            top.xaxis.set_minor_formatter(NullFormatter())
+            top.set_xlabel("I magnitude" if row == 0 else "", fontsize=8)
     for ax in axes[-1]:
         ax.set_xlabel("detected photons per frame")
     fig.legend(
         *axes[0, 0].get_legend_handles_labels(),
         loc="outside lower center",
-        ncol=2,
+        ncol=4,
         fontsize=8,
         title=f"{100 * fraction:g} % of frames, the noisy frames' selection and shifts scored on the noiseless "
-        "frames; colour: registration;\nline style: selection criterion; "
+        "frames; colour and marker: registration;\nline style: selection criterion; "
         f"thin lines: noiseless detector.\nI magnitude: {ds.attrs['i_zero_photons_per_frame']:.3g} "
         f"photons per frame at I = 0\n({ds.attrs['i_bandwidth_um'] * 1e3:g} nm band, throughput "
         f"{ds.attrs['throughput']:g}, {ds.attrs['frame_time_s'] * 1e3:g} ms, 4.2 m)",

@@ -5,7 +5,7 @@ import xarray as xr
 
 from .quality import NOISE_DOMINATED
 from .settings import FigureSettings, case_coords
-from .style import AO_STYLE, CRITERIA, MARKERS, METRICS, colour, new_figure, with_error
+from .style import AO_STYLE, CRITERIA, MARKERS, METRICS, SCREEN_INCHES, colour, new_figure, with_error
 
 
 def quality_vs_signal_data(settings: FigureSettings, datasets) -> xr.Dataset:
@@ -102,15 +102,16 @@ def signal_data(settings: FigureSettings, datasets) -> xr.Dataset:
 
 
 def draw_quality_vs_signal(ds: xr.Dataset, title: str):
-    """A row per (registration method, read noise), a column per fraction."""
+    """One screen of small panels on shared axes: a row per registration method, a column
+    per (read noise, fraction); colour and marker: criterion; line style: case."""
     metric = ds.attrs["metric"]
-    rows = [(method, read_noise) for method in ds.registration.values for read_noise in ds.read_noise.values]
-    n_rows, n_cols = len(rows), ds.sizes["fraction"]
-    fig = new_figure(4.3 * n_cols, 3.6 * n_rows + 1.1)
-    axes = fig.subplots(n_rows, n_cols, squeeze=False, sharey=True)
+    columns = [(read_noise, fraction) for read_noise in ds.read_noise.values for fraction in ds.fraction.values]
+    n_rows, n_cols = ds.sizes["registration"], len(columns)
+    fig = new_figure(*SCREEN_INCHES)
+    axes = fig.subplots(n_rows, n_cols, squeeze=False, sharex=True, sharey=True)
     flag = f"{metric}_noise_dominated"
-    for r, (method, read_noise) in enumerate(rows):
-        for f, fraction in enumerate(ds.fraction.values):
+    for r, method in enumerate(ds.registration.values):
+        for f, (read_noise, fraction) in enumerate(columns):
             ax = axes[r, f]
             for case in ds.case.values:
                 ls = AO_STYLE[str(ds.ao_mode.sel(case=case).values)]
@@ -125,7 +126,7 @@ def draw_quality_vs_signal(ds: xr.Dataset, title: str):
                         ds.signal,
                         y,
                         marker=MARKERS[k % 8],
-                        ms=3.5,
+                        ms=3,
                         color=colour(k),
                         ls=ls,
                         label=f"{cell.label.values}, by {CRITERIA.get(criterion, criterion)}",
@@ -138,15 +139,14 @@ def draw_quality_vs_signal(ds: xr.Dataset, title: str):
                             float(cell[f"{metric}_noiseless_detector"]), color=colour(k), lw=0.6, ls=ls, alpha=0.6
                         )
             ax.set_xscale("log")
-            ax.set_xlabel("detected photons per frame")
-            ax.set_ylabel(METRICS[metric])
-            ax.set_title(
-                f"({chr(ord('a') + r * n_cols + f)}) {method}, read noise {read_noise:g} e-, "
-                f"{100 * fraction:g} % of frames",
-                loc="left",
-                fontsize=9,
-            )
             ax.grid(alpha=0.3)
+            ax.tick_params(labelsize=7)
+            if r == 0:
+                ax.set_title(f"read noise {read_noise:g} e-\n{100 * fraction:g} % of frames", fontsize=8)
+            if r == n_rows - 1:
+                ax.set_xlabel("photons per frame", fontsize=8)
+        axes[r, 0].set_ylabel(method, fontsize=9, fontweight="bold")
+    fig.supylabel(METRICS[metric], fontsize=9)
     # the axis spans the values the noise leaves alone: at a few photons the recentring fails
     # and the images blur far off the scale (arcsec)
     settled = [ds[metric].isel(signal=-1).max()] + (
@@ -158,7 +158,8 @@ def draw_quality_vs_signal(ds: xr.Dataset, title: str):
         loc="outside lower center",
         ncol=3,
         fontsize=8,
-        title="colour: selection criterion; line style: case; thin horizontal lines: noiseless detector\n"
+        title="rows: registration method; colour and marker: selection criterion; line style: case; thin "
+        "horizontal lines: noiseless detector\n"
         f"bands: ±1 Monte-Carlo standard error; points more than {NOISE_DOMINATED:.0%} off the same "
         "selection on the noiseless frames\nare noise-dominated and left out; values above the axis: blurred "
         "by recentring on noise",

@@ -1,18 +1,74 @@
-"""One look for every figure of the study: a colour-blind-safe palette (Okabe & Ito
-2008, "Color Universal Design"), one colour per main distinction of a figure, line
-styles for the second, and the names of metrics and criteria."""
+"""One look for every figure of the study: a palette whose first colours stay apart to
+colour-blind eyes (``colour_vision``), one colour per main distinction of a figure, line
+styles and markers for the second, a size that fits one screen, the fraction axis in
+percent, and human names of metrics, criteria and config keys."""
+
+from dataclasses import dataclass
 
 import numpy as np
 import xarray as xr
 from matplotlib.figure import Figure
+from matplotlib.ticker import LogFormatter
 
-PALETTE = ("#0072B2", "#D55E00", "#009E73", "#CC79A7", "#E69F00", "#56B4E9", "#F0E442", "#000000")
-"""Okabe-Ito: blue, vermillion, bluish green, reddish purple, orange, sky blue, yellow, black."""
+PALETTE = ("#004488", "#E69F00", "#000000", "#BB5566", "#CC3311", "#228833", "#882255", "#4477AA")
+"""Dark blue, orange, black, rose (Tol's high-contrast scheme with Okabe & Ito's orange), then
+red, green, wine, blue (Tol's "vibrant", "bright" and "muted"): the first
+:data:`DISTINCT_COLOURS` pairwise at least ``colour_vision.DISTINCT_DE00`` apart (CIEDE2000)
+to normal, deuteranope and protanope eyes (no five colours are: 21 at most among these
+schemes' and Okabe & Ito's); two series of a figure drawn in other colours differ in
+marker or line style too (tests/test_figure_style.py checks every published figure)."""
+DISTINCT_COLOURS = 4
 
 LINE_STYLES = ("-", "--", "-.", ":")
 MARKERS = "os^vDP<>"
 AO_STYLE = {"ltao": "-", "glao": "-.", "none": "--"}
 """Line style of a case by its AO mode (the figures whose colour is the case)."""
+
+SCREEN_INCHES = (12.8, 8.0)
+"""The largest figure: 1920 x 1200 pixels at the saved :data:`DPI`, one screen."""
+DPI = 150
+
+
+@dataclass(frozen=True)
+class Parameter:
+    """How a config key reads on an axis: a name, its unit, and the factor from the
+    config's unit to it."""
+
+    name: str
+    unit: str = ""
+    scale: float = 1.0
+
+    def label(self) -> str:
+        return f"{self.name} [{self.unit}]" if self.unit else self.name
+
+
+PARAMETERS = {
+    "atmosphere.r0_500nm_m": Parameter("r0 at 500 nm", "cm", 100.0),
+    "atmosphere.r0_amplitude_m": Parameter("r0 amplitude", "cm", 100.0),
+    "telescope.diameter_m": Parameter("telescope diameter", "m"),
+    "ao.mode": Parameter("AO"),
+    "ao.n_actuators": Parameter("DM actuators across"),
+    "wfs.n_subapertures": Parameter("WFS sub-apertures across"),
+    "lgs.height_m": Parameter("LGS height", "km", 1e-3),
+    "ao.apodisation.blocked_fraction": Parameter("pupil blocked by the apodisation", "%", 100.0),
+    "ao.apodisation.driver": Parameter("apodisation driver"),
+}
+"""Config keys (sweep parameters) as figures name them; any other key reads as itself."""
+
+
+def parameter(key: str) -> Parameter:
+    """How ``key`` reads on an axis (:data:`PARAMETERS`, else the key itself)."""
+    return PARAMETERS.get(key, Parameter(key))
+
+
+def fraction_axis(ax) -> None:
+    """The fraction of frames selected on a log x axis in percent, ticks read 1, 10, 100 (and
+    20, 30, 40... on an axis short of a decade)."""
+    ax.set_xscale("log")
+    ax.xaxis.set_major_formatter(LogFormatter())
+    ax.xaxis.set_minor_formatter(LogFormatter(labelOnlyBase=False))
+    ax.set_xlabel("frames selected [%]")
+
 
 METRICS = {
     "strehl": "Strehl ratio",
@@ -34,8 +90,9 @@ def colour(k: int) -> str:
 
 
 def new_figure(width: float, height: float) -> Figure:
-    """A figure with constrained layout, without pyplot (no GUI backend is touched)."""
-    return Figure(figsize=(width, height), layout="constrained")
+    """A figure with constrained layout, without pyplot (no GUI backend is touched), at most
+    one screen (:data:`SCREEN_INCHES`)."""
+    return Figure(figsize=(min(width, SCREEN_INCHES[0]), min(height, SCREEN_INCHES[1])), layout="constrained")
 
 
 def band(ax, x, values: xr.Dataset, metric: str, shade: str) -> None:

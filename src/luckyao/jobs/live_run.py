@@ -15,14 +15,16 @@ without waiting: granted, no run and no job uses the folder, so a killed run's
 Snakemake lock and its jobs' ``*.partial`` files are stale and removed; refused,
 a run or an orphaned job is live and nothing is touched (Snakemake then refuses
 the folder by its own lock until the job has ended). The lock is then turned
-shared and kept across ``exec`` into Snakemake, so the folder is never seen idle
-while it starts.
+shared and passed on to Snakemake (its child, or across ``exec`` with ``--verbose``),
+so the folder is never seen idle while it starts.
 """
 
 import contextlib
 import fcntl
 import io
 import os
+import signal
+import subprocess
 import sys
 from pathlib import Path
 
@@ -140,17 +142,58 @@ def snakemake_words(argv: list[str]) -> list[str]:
     return [*targets, *rest, *(["--config", *entries] if entries else [])]
 
 
+def run_snakemake(argv: list[str], lock_fd: int | None) -> int:
+    """Snakemake with ``argv`` as a child holding the run lock (``lock_fd``), its log shown
+    through :class:`~luckyao.jobs.progress.Progress` (one line per job, a progress line);
+    returns its exit status. Ctrl-C reaches Snakemake (same process group), which stops its
+    jobs; its last lines are still shown."""
+    from .progress import Progress, declared_runtimes
+
+    progress = Progress(declared_runtimes())
+    child = subprocess.Popen(
+        [sys.executable, "-m", "snakemake", *argv],
+        stderr=subprocess.PIPE,
+        pass_fds=() if lock_fd is None else (lock_fd,),
+        text=True,
+        errors="replace",
+    )
+    handlers = signal.signal(signal.SIGINT, signal.SIG_IGN), signal.getsignal(signal.SIGTERM)
+    signal.signal(signal.SIGTERM, lambda *_: child.terminate())  # Snakemake gets Ctrl-C itself
+    try:
+        for line in child.stderr:
+            for shown in progress.feed(line):
+                print(shown, file=sys.stderr, flush=True)
+        for shown in progress.close():
+            print(shown, file=sys.stderr, flush=True)
+        status = child.wait()
+    finally:
+        signal.signal(signal.SIGINT, handlers[0])
+        signal.signal(signal.SIGTERM, handlers[1])
+    return 128 - status if status < 0 else status  # killed by signal N: 128 + N, as a shell says
+
+
+def verbose(argv: list[str]) -> bool:
+    """Snakemake's log unchanged: ``--verbose`` or ``LUCKYAO_VERBOSE=1``."""
+    from .progress import VERBOSE_ENV
+
+    return "--verbose" in argv or os.environ.get(VERBOSE_ENV, "") not in ("", "0")
+
+
 def main(argv: list[str]) -> None:
-    """``bash run.sh study ARGS``: clean up if the study folder is idle, then become
-    ``python -m snakemake ARGS`` holding the folder's run lock (``case=NAME`` and ``key=value``
-    words first turned into Snakemake's, :func:`snakemake_words`)."""
+    """``bash run.sh study ARGS``: clean up if the study folder is idle, then run
+    ``python -m snakemake ARGS`` holding the folder's run lock: its log shortened with a
+    progress line (``luckyao.jobs.progress``), or as it is with ``--verbose`` (``case=NAME`` and
+    ``key=value`` words first turned into Snakemake's, :func:`snakemake_words`)."""
     argv = snakemake_words(argv)
     refuse_unsafe_overlays(argv)
     folder = study_folder(argv)
+    fd = None
     if folder is not None and folder.is_dir():
         fd = clean_if_idle(folder, echo=lambda line: print(line, file=sys.stderr))
         os.set_inheritable(fd, True)
-    os.execv(sys.executable, [sys.executable, "-m", "snakemake", *argv])
+    if verbose(argv):
+        os.execv(sys.executable, [sys.executable, "-m", "snakemake", *argv])
+    sys.exit(run_snakemake(argv, fd))
 
 
 if __name__ == "__main__":

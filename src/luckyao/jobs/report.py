@@ -9,8 +9,8 @@ from ..studyspec.case import Case
 
 KINDS = {
     "quality_vs_fraction": "Integrated-image quality (Strehl ratio, FWHM, 50%-energy diameter) vs the fraction of "
-    "frames selected, a row of panels per selection criterion, a colour per case; dotted: "
-    "the long exposure without recentring.",
+    "frames selected, a row of panels per selection criterion, a colour and marker per case, a line "
+    "style per AO mode; curves that coincide drawn once; dotted: the long exposure without recentring.",
     "quality_vs_parameter": "Integrated-image quality vs a swept parameter, a row per selection criterion, a colour "
     "per value of the sweep's other parameters, a line style per fraction selected.",
     "quality_vs_diameter": "Integrated-image Strehl ratio and 50%-energy diameter vs the telescope diameter, a row per "
@@ -21,12 +21,12 @@ KINDS = {
     "sweep's knees (90 % of the noiseless integrated Strehl; d50 within 10 %) through each case's aperture "
     "(100 Hz frames), a colour per AO mode and beacon height, a line style per registration method.",
     "quality_vs_signal": "Integrated-image quality vs detected photons per lucky frame (the detector sweep: Poisson "
-    "photon noise and Gaussian read noise), a row per read noise and a column per fraction "
-    "selected; the noiseless detector's value for reference; noise-dominated points (more than "
+    "photon noise and Gaussian read noise), a row per registration method and a column per read "
+    "noise and fraction selected; the noiseless detector's value for reference; noise-dominated points (more than "
     "30 % off the same selection on the noiseless frames) are left out.",
     "registration": "Integrated-image Strehl ratio and 50%-energy diameter vs detected photons per lucky frame "
-    "(the detector sweep) for every registration method (colour), selection criterion (line "
-    "style), read noise (rows) and case (columns), the top axis in I magnitude (4.2 m, 100 Hz); "
+    "(the detector sweep) for every registration method (colour and marker), selection criterion "
+    "(line style), metric (rows), case and read noise (columns), the top axis in I magnitude (4.2 m, 100 Hz); "
     "its dataset holds each curve's knee (luckyao knees).",
     "quality_vs_distance": "Integrated-image quality vs the target's off-axis distance in the field, a row per "
     "selection criterion, a colour per case and a line style per fraction selected.",
