@@ -88,14 +88,14 @@ lock() {
     trap 'rm -rf "$tmp"' RETURN
     "$PYTHON" -m venv "$tmp/venv"
     "$tmp/venv/bin/python" -m pip install --quiet --upgrade pip
-    "$tmp/venv/bin/python" -m pip install --quiet --no-compile ".[$EXTRAS]"
+    "$tmp/venv/bin/python" -m pip install --quiet --no-compile -e ".[$EXTRAS]"   # -e: no build/ left here
     {
         echo "# Every package of run.sh's .venv (pyproject's extras $EXTRAS), exact versions"
         echo "# (Python $("$tmp/venv/bin/python" -c 'import platform; print(platform.python_version())')); made by \`bash run.sh lock\`."
         "$tmp/venv/bin/python" -m pip freeze --exclude luckyao
     } > requirements.lock
     "$tmp/venv/bin/python" -m pip freeze --exclude luckyao > "$tmp/base.txt"
-    "$tmp/venv/bin/python" -m pip install --quiet --no-compile -c requirements.lock ".[$EXTRAS,docs]"
+    "$tmp/venv/bin/python" -m pip install --quiet --no-compile -c requirements.lock -e ".[$EXTRAS,docs]"
     {
         echo "# What the docs extra adds to requirements.lock, exact versions; made by \`bash run.sh lock\`."
         "$tmp/venv/bin/python" -m pip freeze --exclude luckyao | grep -vxF -f "$tmp/base.txt"

@@ -16,7 +16,7 @@ import pytest
 import xarray as xr
 import yaml
 
-from studies import REPO, TINY, snakemake
+from studies import REPO, TINY, snakemake, with_sweep
 
 pytestmark = pytest.mark.workflow  # runs Snakemake, a study or the command line: -m 'not workflow' skips it
 
@@ -300,6 +300,21 @@ def test_a_sweep_figure_draws_every_point_and_a_new_value_reruns_only_its_case(f
     jobs = planned_after_edit(workdir, study)
     assert {w for rule, w in jobs if rule in ("simulate", "lucky", "export")} == {"case=r0_r0_500nm_m-0.3"}
     assert {w for rule, w in jobs if rule == "figure"} == {"fig=sweep"}
+
+
+def test_a_sweep_figures_points_keep_the_sweeps_parameter_order(tmp_path):
+    """A sweep figure without ``parameter`` draws against the sweep's first parameter: its
+    points reach the figure with their values in the sweep's order (before: sorted as text by
+    the settings' canonical JSON, ``ao.mode`` before ``atmosphere.r0_500nm_m``)."""
+    from luckyao.figures.settings import FigureSettings
+
+    study = with_sweep({"atmosphere.r0_500nm_m": [0.2, 0.15], "ao.mode": ["none"]})
+    write_config(tmp_path).write_text(yaml.safe_dump(study, sort_keys=False))  # the sweep's order kept
+    result = snakemake(tmp_path, "--dry-run")
+    assert result.returncode == 0, result.stderr[-3000:]
+    [path] = (tmp_path / "results" / "figures" / "settings").glob("grid_*.json")
+    settings = FigureSettings.from_dict(json.loads(path.read_text()))
+    assert [list(values) for _, values in settings.sweep_points] == [["atmosphere.r0_500nm_m", "ao.mode"]] * 2
 
 
 def test_fits_images_read_back_with_their_header_and_flux(finished_run):

@@ -350,9 +350,12 @@ def export_fits(lucky_path, out_path, detectors=None, registrations=None, layout
     primary.header["LAYOUT"] = (layout, "images: 2-D per image; cube: fraction as axis 3")
     primary.header["NIMAGES"] = (len(rows), "images (a cube's planes each one)")
     primary.header["INDEXHDU"] = (1, "extension of the INDEX table of the images")
-    hdus = [_hdu(fits, image.data, image.name, image.cards) for image in images]
     partial = f"{out_path}.partial"
-    fits.HDUList([primary, _index_hdu(fits, rows), *hdus]).writeto(partial, overwrite=True)
+    fits.HDUList([primary, _index_hdu(fits, rows)]).writeto(partial, overwrite=True)
+    for image in images:  # appended one at a time: one header in memory (thousands per noise case)
+        hdu = _hdu(fits, image.data, image.name, image.cards)
+        with fits.StreamingHDU(partial, hdu.header) as stream:
+            stream.write(hdu.data)
     os.replace(partial, out_path)
     return len(rows)
 
