@@ -146,7 +146,7 @@ def _noise_flags(values: xr.Dataset) -> dict:
     noiseless frames (``lucky.nc``'s ``<metric>_noise_dominated``, from the same function)."""
     return {
         f"{key}ND": (
-            bool(noise_dominated(values[name], values[f"{name}_noiseless"])),
+            bool(noise_dominated(np.float64(values[name]), np.float64(values[f"{name}_noiseless"]))),
             f"T: {key} noise-dominated (>{NOISE_DOMINATED:.0%} off noiseless)",
         )
         for key, name, _ in QUALITY
