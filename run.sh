@@ -4,12 +4,15 @@
 #   bash run.sh test  [pytest args...]      set up .venv, lint, run the test suite
 #   bash run.sh lint                        set up .venv, lint and format checks only
 #   bash run.sh docs  [sphinx args...]      set up .venv (docs extra), build docs/_build/html
-# Needs only Python >= 3.11 with pip; installs everything into .venv.
+#   bash run.sh lock                        refresh requirements.lock and requirements-docs.lock
+# Needs only Python >= 3.11 with pip; installs everything into .venv, at the exact versions of
+# requirements.lock (the docs' tools: requirements-docs.lock).
 set -euo pipefail
 cd "$(dirname "$0")"
 
 PYTHON="${PYTHON:-python3}"
 VENV=.venv
+EXTRAS=test   # pyproject's extras of the .venv: the study's (workflow, plots, fits) and the suite's
 # the same BLAS kernels on every machine, so the same numbers (src/luckyao/__init__.py)
 export OPENBLAS_CORETYPE="${OPENBLAS_CORETYPE:-Haswell}"
 
@@ -49,12 +52,15 @@ setup() {
     # reinstall only when the package metadata changed (or the .venv is new); the stamp
     # records the checkout it was built for
     local stamp="$VENV/.luckyao-installed"
-    if [ ! -f "$stamp" ] || [ pyproject.toml -nt "$stamp" ]; then
+    if [ ! -f "$stamp" ] || [ pyproject.toml -nt "$stamp" ] || [ requirements.lock -nt "$stamp" ]; then
         "$VENV/bin/python" -m pip install --quiet --upgrade pip
-        # byte-compiled on both cores by compileall, not one file at a time by pip (~20 s less),
-        # with the package's own source (its editable install is not compiled, and every job
-        # imports it); a file that does not compile (as pip would) only runs uncompiled
-        "$VENV/bin/python" -m pip install --quiet --no-compile -e ".[test]"
+        # every package at the version requirements.lock pins (a package the lock misses would
+        # come unpinned: the suite compares the .venv with the lock); byte-compiled on both
+        # cores by compileall, not one file at a time by pip (~20 s less), with the package's
+        # own source (its editable install is not compiled, and every job imports it); a file
+        # that does not compile (as pip would) only runs uncompiled
+        echo "luckyao: installing .venv from requirements.lock" >&2
+        "$VENV/bin/python" -m pip install --quiet --no-compile -r requirements.lock -e ".[$EXTRAS]"
         "$VENV/bin/python" -m compileall -q -j 0 src \
             "$("$VENV/bin/python" -c 'import sysconfig; print(sysconfig.get_paths()["purelib"])')" > /dev/null || true
         printf '%s\n' "$here" > "$stamp"
@@ -65,10 +71,37 @@ setup() {
 setup_docs() {
     setup
     local stamp="$VENV/.luckyao-docs-installed"
-    if [ ! -f "$stamp" ] || [ pyproject.toml -nt "$stamp" ]; then
-        "$VENV/bin/python" -m pip install --quiet --no-compile -e ".[test,docs]"
+    if [ ! -f "$stamp" ] || [ pyproject.toml -nt "$stamp" ] || [ requirements-docs.lock -nt "$stamp" ]; then
+        echo "luckyao: installing the docs' tools from requirements-docs.lock" >&2
+        "$VENV/bin/python" -m pip install --quiet --no-compile -r requirements.lock -r requirements-docs.lock \
+            -e ".[$EXTRAS,docs]"
         touch "$stamp"
     fi
+}
+
+# The locks, refreshed: the newest releases pyproject.toml allows, installed into a new
+# throwaway environment, as pip freeze lists them (the package itself left out); the docs'
+# lock holds what the docs extra adds, at the versions requirements.lock keeps.
+lock() {
+    local tmp
+    tmp="$(mktemp -d)"
+    trap 'rm -rf "$tmp"' RETURN
+    "$PYTHON" -m venv "$tmp/venv"
+    "$tmp/venv/bin/python" -m pip install --quiet --upgrade pip
+    "$tmp/venv/bin/python" -m pip install --quiet --no-compile -e ".[$EXTRAS]"   # -e: no build/ left here
+    {
+        echo "# Every package of run.sh's .venv (pyproject's extras $EXTRAS), exact versions"
+        echo "# (Python $("$tmp/venv/bin/python" -c 'import platform; print(platform.python_version())')); made by \`bash run.sh lock\`."
+        "$tmp/venv/bin/python" -m pip freeze --exclude luckyao
+    } > requirements.lock
+    "$tmp/venv/bin/python" -m pip freeze --exclude luckyao > "$tmp/base.txt"
+    "$tmp/venv/bin/python" -m pip install --quiet --no-compile -c requirements.lock -e ".[$EXTRAS,docs]"
+    {
+        echo "# What the docs extra adds to requirements.lock, exact versions; made by \`bash run.sh lock\`."
+        "$tmp/venv/bin/python" -m pip freeze --exclude luckyao | grep -vxF -f "$tmp/base.txt"
+    } > requirements-docs.lock
+    echo "luckyao: wrote requirements.lock ($(grep -cv '^#' requirements.lock) packages) and" \
+        "requirements-docs.lock ($(grep -cv '^#' requirements-docs.lock))" >&2
 }
 
 # The habits CI keeps: the code linted and formatted (ruff), the rules formatted (snakefmt)
@@ -100,13 +133,16 @@ case "$command" in
         setup
         lint
         ;;
+    lock)
+        lock
+        ;;
     docs)
         setup_docs
         # warnings are errors; the gallery's examples (docs/examples/) run during the build
         exec "$VENV/bin/python" -m sphinx -W --keep-going -b html docs docs/_build/html "$@"
         ;;
     *)
-        echo "usage: bash run.sh study|test|lint|docs [args...]" >&2
+        echo "usage: bash run.sh study|test|lint|docs|lock [args...]" >&2
         exit 2
         ;;
 esac

@@ -18,7 +18,7 @@ import yaml
 
 from luckyao.figures.registration import i_magnitude
 
-from studies import REPO, TINY, snakemake
+from studies import REPO, TINY, snakemake, with_sweep
 
 pytestmark = pytest.mark.workflow  # runs Snakemake, a study or the command line: -m 'not workflow' skips it
 
@@ -304,6 +304,21 @@ def test_a_sweep_figure_draws_every_point_and_a_new_value_reruns_only_its_case(f
     assert {w for rule, w in jobs if rule == "figure"} == {"fig=sweep"}
 
 
+def test_a_sweep_figures_points_keep_the_sweeps_parameter_order(tmp_path):
+    """A sweep figure without ``parameter`` draws against the sweep's first parameter: its
+    points reach the figure with their values in the sweep's order (before: sorted as text by
+    the settings' canonical JSON, ``ao.mode`` before ``atmosphere.r0_500nm_m``)."""
+    from luckyao.figures.settings import FigureSettings
+
+    study = with_sweep({"atmosphere.r0_500nm_m": [0.2, 0.15], "ao.mode": ["none"]})
+    write_config(tmp_path).write_text(yaml.safe_dump(study, sort_keys=False))  # the sweep's order kept
+    result = snakemake(tmp_path, "--dry-run")
+    assert result.returncode == 0, result.stderr[-3000:]
+    [path] = (tmp_path / "results" / "figures" / "settings").glob("grid_*.json")
+    settings = FigureSettings.from_dict(json.loads(path.read_text()))
+    assert [list(values) for _, values in settings.sweep_points] == [["atmosphere.r0_500nm_m", "ao.mode"]] * 2
+
+
 def test_fits_images_read_back_with_their_header_and_flux(finished_run):
     """Every image of a case's lucky.nc is an extension of fits/<case>.fits with its pixels,
     quality and errors, provenance and a WCS in arcsec; the tiny study keeps the whole
@@ -315,10 +330,10 @@ def test_fits_images_read_back_with_their_header_and_flux(finished_run):
     lucky = baseline(workdir / "results" / "cases" / "good" / "lucky.nc")
     with fits.open(workdir / "fits" / "good.fits") as hdus:
         per_detector = lucky.sizes["criterion"] * lucky.sizes["fraction"] + lucky.sizes["recentring"]
-        assert hdus[0].header["NIMAGES"] == len(hdus) - 1 == per_detector * lucky.sizes["detector"]
+        assert hdus[0].header["NIMAGES"] == len(hdus) - 2 == per_detector * lucky.sizes["detector"]  # - INDEX
         for detector in lucky.detector.values:
             cell = lucky.sel(criterion="strehl", fraction=0.1, detector=detector).isel(target=0)
-            image = hdus[f"LUCKY_T0_STREHL_0.1_{detector.upper()}"]
+            image = hdus[f"LUCKY_T0_COG_STREHL_0.1_{detector.upper()}"]
             np.testing.assert_array_equal(image.data, cell.image.values)
             for key, name in (
                 ("STREHL", "strehl"),
@@ -342,6 +357,114 @@ def test_fits_images_read_back_with_their_header_and_flux(finished_run):
         wcs = WCS(header)
         assert wcs.pixel_to_world_values(32, 32) == pytest.approx((0.0, 0.0))
         assert wcs.pixel_to_world_values(33, 32)[0] == pytest.approx(1.25 / 64)
+
+
+def _image_of(lucky: xr.Dataset, row) -> np.ndarray:
+    """The image of lucky.nc that an ``INDEX`` row of its FITS file names."""
+    if row["IMAGETYP"] == "lucky":
+        cell = lucky.image.sel(registration=row["REGISTR"], criterion=row["CRITERIO"], fraction=row["FRACTION"])
+    else:
+        recentred = row["RECENTR"] != "none"
+        method = row["REGISTR"] if recentred else lucky.registration.values[0]
+        cell = lucky.long_exposure_image.sel(registration=method, recentring="cog" if recentred else "none")
+    return cell.sel(detector=row["DETECTOR"]).isel(target=row["TARGET"]).values
+
+
+def test_fits_headers_are_standard_and_index_every_image_of_every_registration(finished_run, tmp_path):
+    """fits/<case>.fits of the noise figures' case: every image of lucky.nc, every registration
+    method (before: cog alone, no keyword saying so), bit for bit, found through the INDEX table
+    (extension 1), with a BUNIT astropy's FITS parser reads (before: '1'), DATE, EXPTIME (the
+    selected frames' exposure), PHOTONS a number or absent for the noiseless detector (before:
+    the string 'none'), the noise-dominated flags of lucky.nc; the cube layout holds the same
+    images, the fraction along its third axis."""
+    import astropy.units as u
+    from astropy.io import fits
+    from astropy.time import Time
+
+    from luckyao.cli import main
+
+    workdir, _ = finished_run
+    lucky = xr.open_dataset(workdir / "results" / "cases" / "lgs" / "lucky.nc")
+    cube_path = tmp_path / "cube.fits"
+    assert (
+        main(["export", str(workdir / "results" / "cases" / "lgs" / "lucky.nc"), "--out", str(cube_path), "--cube"])
+        == 0
+    )
+    with fits.open(workdir / "fits" / "lgs.fits") as hdus, fits.open(cube_path) as cubes:
+        index = hdus[hdus[0].header["INDEXHDU"]].data
+        assert hdus[1].name == "INDEX" and len(index) == hdus[0].header["NIMAGES"] == len(hdus) - 2
+        assert set(index["REGISTR"]) - {""} == set(lucky.registration.values) == {"cog", "xcorr"}
+        frame_time = hdus[0].header["FRAMETIM"]
+        assert Time(hdus[0].header["DATE"], format="isot", scale="utc")
+        for row in index:
+            hdu = hdus[int(row["HDU"])]
+            header = hdu.header
+            assert hdu.name == row["EXTNAME"] and header.get("REGISTR", "") == row["REGISTR"]
+            pixels = hdu.data.astype(np.float32)  # FITS's big-endian floats as the native ones, exactly
+            assert pixels.tobytes() == _image_of(lucky, row).astype(np.float32).tobytes()
+            assert u.Unit(header["BUNIT"], format="fits") == u.dimensionless_unscaled
+            assert header["EXPTIME"] == pytest.approx(header["NCOMBINE"] * frame_time, rel=1e-12)
+            noiseless = not np.isfinite(float(lucky.photons_per_frame.sel(detector=row["DETECTOR"])))
+            assert header["NOISELES"] is noiseless and ("PHOTONS" in header) is not noiseless
+            assert noiseless or isinstance(header["PHOTONS"], float)
+            if row["IMAGETYP"] == "lucky":
+                cell = lucky.sel(
+                    registration=row["REGISTR"],
+                    criterion=row["CRITERIO"],
+                    fraction=row["FRACTION"],
+                    detector=row["DETECTOR"],
+                ).isel(target=row["TARGET"])
+                assert header["NCOMBINE"] == int(cell.n_frames_selected)
+                assert header["STREHLND"] is bool(cell.strehl_noise_dominated) is bool(row["STREHLND"])
+                cube = cubes[f"LUCKY_T0_{row['REGISTR']}_{row['CRITERIO']}_{row['DETECTOR']}".upper()]
+                plane = list(lucky.fraction.values).index(row["FRACTION"])
+                assert cube.header[f"FRAC{plane + 1}"] == row["FRACTION"]
+                assert cube.data[plane].tobytes() == hdu.data.tobytes()
+        assert cubes[0].header["NIMAGES"] == len(index) and cubes[0].header["LAYOUT"] == "cube"
+
+
+def test_lucky_files_store_detectors_by_signal_and_flag_noise_dominated_values(finished_run):
+    """lucky.nc's detectors: the noiseless first, then by read noise and photons per frame (before:
+    as text, 'faint' (1000 photons) before 'noiseless' and 'rn0.1_100ph'); each metric's
+    ``<metric>_noise_dominated`` is 1 where it is more than 30 % off the noiseless frames' value,
+    every Strehl above 1 among them."""
+    workdir, _ = finished_run
+    lgs = xr.open_dataset(workdir / "results" / "cases" / "lgs" / "lucky.nc")
+    assert list(lgs.detector.values) == ["noiseless", "rn0.1_100ph", "faint", "rn0.1_1e+04ph"]
+    for metric in ("strehl", "fwhm_arcsec", "d50_arcsec"):
+        value, clean = lgs[metric], lgs[f"{metric}_noiseless"]
+        expected = ~(np.abs(value - clean) <= 0.3 * np.abs(clean))
+        np.testing.assert_array_equal(lgs[f"{metric}_noise_dominated"].values, expected.values.astype(np.int8))
+    assert (lgs.strehl_noise_dominated.values[lgs.strehl.values > 1] == 1).all()
+
+
+def test_every_dataset_has_cf_attributes_with_udunits_units(finished_run):
+    """Every variable and coordinate of every dataset the study writes (results/**/*.nc,
+    figures/*.nc) has a long_name (or a standard_name), every numeric one units, and every unit
+    parses in UDUNITS-2 (cf-units; before: 'photon', 'electron', 'pixel', and the registration
+    figure without attributes)."""
+    import cf_units
+    import netCDF4
+
+    workdir, _ = finished_run
+    paths = sorted(workdir.glob("results/**/*.nc")) + sorted(workdir.glob("figures/*.nc"))
+    assert len(paths) > 20 and any(p.name == "registration.nc" for p in paths)
+    problems = []
+    for path in paths:
+        with netCDF4.Dataset(path) as ds:
+            for name, variable in ds.variables.items():
+                attrs = set(variable.ncattrs())
+                where = f"{path.relative_to(workdir)}: {name}"
+                if not attrs & {"long_name", "standard_name"}:
+                    problems.append(f"{where}: no long_name")
+                if variable.dtype != str and "units" not in attrs:
+                    problems.append(f"{where}: no units")
+                if "units" in attrs:
+                    try:
+                        cf_units.Unit(variable.units)
+                    except ValueError:
+                        problems.append(f"{where}: units {variable.units!r} not UDUNITS")
+    assert not problems, "\n".join(problems)
 
 
 def test_the_psf_gallery_shows_each_image_in_units_of_the_diffraction_limited_peak(finished_run):

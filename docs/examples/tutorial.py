@@ -63,14 +63,15 @@ print(f"long exposure (all frames, no recentring): Strehl {float(long_exposure.i
 # %%
 # 4. The images as FITS
 # ---------------------
-# For DS9, astropy or any PSF tool: one extension per image, with the pixel scale (WCS),
-# wavelength, Strehl/FWHM/d50 and errors, seed and config hash.
+# For DS9, astropy or any PSF tool: one extension per image (found by name or through the
+# INDEX table, extension 1), with the pixel scale (WCS), wavelength, exposure time,
+# Strehl/FWHM/d50 and errors, registration method, seed and config hash.
 fits_path = out / "ltao_r0_10cm.fits"
 n_images = luckyao.export_fits(out / "run" / "ltao_r0_10cm" / "lucky.nc", fits_path)
 from astropy.io import fits  # noqa: E402
 
 with fits.open(fits_path) as hdus:
-    header = hdus["LUCKY_T0_LGS_RMS_0.01_NOISELESS"].header
+    header = hdus["LUCKY_T0_COG_LGS_RMS_0.01_NOISELESS"].header
     print(
         f"{fits_path}: {n_images} images; 1 % by lgs_rms: Strehl {header['STREHL']:.4f} ± {header['STREHLE']:.4f}, "
         f"{header['CDELT1']:.4f} arcsec/pixel, {header['WAVELENG'] * 1e9:.0f} nm"

@@ -77,11 +77,12 @@ def draw(data: xr.Dataset, title: str | None = None):
     return FIGURE_KINDS[settings["kind"]][1](data, title or str(data.attrs.get("title", "")).split()[-1])
 
 
-def export_fits(lucky_path, out_path, detectors=None) -> int:
-    """A case's images as FITS (see ``luckyao export``); returns the number of images."""
+def export_fits(lucky_path, out_path, detectors=None, registrations=None, layout: str = "images") -> int:
+    """A case's images as FITS (see ``luckyao export``; ``layout`` ``images`` or ``cube``);
+    returns the number of images."""
     from .io.fits import export_fits as export
 
-    return export(lucky_path, out_path, detectors)
+    return export(lucky_path, out_path, detectors, registrations, layout)
 
 
 def _step(*argv: str) -> None:

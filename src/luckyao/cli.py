@@ -11,12 +11,12 @@ luckyao calibration --spec JSON --out W.nc
 luckyao commands --spec JSON --out C.nc
 luckyao lucky --settings JSON --frames F --telemetry T --out lucky.nc [--screens S.npy --screens-metadata S.nc]
 luckyao figure --id ID (--settings JSON | --settings-file S.json) --out-prefix figures/ID  lucky.nc ...
-luckyao export lucky.nc --out images.fits [--detector NAME ...]
+luckyao export lucky.nc --out images.fits [--detector NAME ...] [--registration NAME ...] [--cube]
 luckyao table figures/longexp.nc
 luckyao knees figures/registration.nc [--fraction F] [--criterion C] [--read-noise R]
 luckyao archive [--study-dir DIR] [--configfile OVERLAY ...] [--out A.tar]
 luckyao verify A.tar [--case NAME | --all-cases] [--workdir DIR] [--rtol R] [--atol A] [--no-rerun]
-luckyao lock [--out requirements.lock]
+luckyao lock [--out FILE]
 """
 
 import argparse
@@ -228,7 +228,7 @@ def cmd_figure(args) -> None:
 def cmd_export(args) -> None:
     from .io.fits import export_fits
 
-    n = export_fits(args.lucky, args.out, args.detector)
+    n = export_fits(args.lucky, args.out, args.detector, args.registration, "cube" if args.cube else "images")
     logging.getLogger(__name__).info("wrote %s: %d images", args.out, n)
 
 
@@ -444,10 +444,17 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("inputs", nargs="*", help="lucky.nc files of the figure's cases, in order")
     p.set_defaults(func=cmd_figure)
 
-    p = sub.add_parser("export", help="a case's integrated and long-exposure images as FITS")
+    p = sub.add_parser("export", help="a case's integrated and long-exposure images as FITS (INDEX: extension 1)")
     p.add_argument("lucky", help="the case's lucky.nc")
     p.add_argument("--out", required=True, help="FITS file to write")
     p.add_argument("--detector", nargs="+", help="only these detectors (default: all)")
+    p.add_argument("--registration", nargs="+", help="only these registration methods (default: all)")
+    p.add_argument(
+        "--cube",
+        action="store_true",
+        help="a cube per target, registration, criterion and detector, the fraction selected as its "
+        "third axis (for DS9); default: an image extension per image",
+    )
     p.set_defaults(func=cmd_export)
 
     p = sub.add_parser("table", help="a long_exposure_table figure's data as a Markdown table")
@@ -479,8 +486,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-rerun", action="store_true", help="checksums and versions only")
     p.set_defaults(func=cmd_verify)
 
-    p = sub.add_parser("lock", help="print (or --out) the exact versions of the runtime packages")
-    p.add_argument("--out", help="file to write, e.g. requirements.lock")
+    p = sub.add_parser(
+        "lock",
+        help="print (or --out) the exact versions of a study's runtime packages, as an archive stores them "
+        "(the .venv's requirements.lock: bash run.sh lock)",
+    )
+    p.add_argument("--out", help="file to write")
     p.set_defaults(func=cmd_lock)
 
     return parser

@@ -137,7 +137,9 @@ def figure_settings(fig):
     if figure["kind"] in SIGNAL_KINDS:
         extra["sweep_detectors"] = sweep_detectors(STUDY["lucky"])
     if "sweep" in figure:
-        extra["sweep_points"] = [[p.case, p.values] for p in sweep_points(STUDY, figure["sweep"])]
+        # each point's values as (path, value) pairs: in the sweep's order (a dict's keys would be
+        # sorted as text in the settings' canonical JSON, and the first parameter is the default x)
+        extra["sweep_points"] = [[p.case, list(p.values.items())] for p in sweep_points(STUDY, figure["sweep"])]
     return {**figure, "seed": STUDY["seed"], "case_configs": {c: CASES[c] for c in figure["cases"]}, **extra}
 
 

@@ -37,7 +37,7 @@ rule figure:
 
 
 rule export:
-    """A case's integrated and long-exposure images as FITS (one image extension each)."""
+    """A case's integrated and long-exposure images as FITS (an image extension each, an INDEX table)."""
     input:
         lucky="results/cases/{case}/lucky.nc",
         code=step_sources("luckyao.io.fits"),

@@ -40,6 +40,8 @@ CASE_FILES = ("lucky.nc", "telemetry.nc")
 FIGURE_EXTENSIONS = ("nc", "png", "pdf")
 CHECKSUMS = "SHA256SUMS"
 REQUIRED = ("MANIFEST.json", "config.yaml", "requirements.lock")
+STUDY_EXTRAS = ("workflow", "plots", "fits")
+"""pyproject's extras a study runs with: Snakemake, the figures, the FITS export."""
 
 
 class ArchiveError(ValueError):
@@ -47,12 +49,13 @@ class ArchiveError(ValueError):
 
 
 def runtime_packages() -> dict[str, str]:
-    """Name -> version of every installed distribution luckyao needs at run time: its
-    requirements, recursively, markers evaluated here (no extras), luckyao excluded."""
+    """Name -> version of every installed distribution a study needs at run time: luckyao's
+    requirements with its extras :data:`STUDY_EXTRAS`, recursively, markers evaluated here,
+    luckyao excluded."""
     from packaging.requirements import Requirement
     from packaging.utils import canonicalize_name
 
-    pinned, seen, todo = {}, set(), [("luckyao", frozenset())]
+    pinned, seen, todo = {}, set(), [("luckyao", frozenset(STUDY_EXTRAS))]
     while todo:
         name, extras = todo.pop()
         if (canonicalize_name(name), extras) in seen:

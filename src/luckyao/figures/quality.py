@@ -5,6 +5,9 @@ import numpy as np
 import xarray as xr
 
 from ..lucky.accumulation import batch_mean_error
+from ..lucky.dataset import NOISE_DOMINATED, noise_flag_attrs
+from ..lucky.dataset import noise_dominated as noise_dominated_values
+from ..studyspec.schema import key_units
 from .settings import FigureSettings, case_coords
 from .style import (
     AO_STYLE,
@@ -21,33 +24,20 @@ from .style import (
     with_error,
 )
 
-NOISE_DOMINATED = 0.3
-"""A noisy detector's value is noise-dominated when it departs from the value of the same
-selection and shifts applied to the noiseless frames by more than this fraction of it."""
-
 
 def noise_dominated(ds: xr.Dataset, metric: str) -> xr.DataArray:
     """Where ``metric`` of a lucky dataset (or a selection of it) is noise-dominated
-    (:data:`NOISE_DOMINATED`); False where the dataset has no noiseless counterpart."""
+    (:func:`luckyao.lucky.dataset.noise_dominated`); False where the dataset has no noiseless counterpart."""
     if f"{metric}_noiseless" not in ds:
         return xr.zeros_like(ds[metric], dtype=bool)
-    value, clean = ds[metric], ds[f"{metric}_noiseless"]
-    return ~(np.abs(value - clean) <= NOISE_DOMINATED * np.abs(clean))
+    return noise_dominated_values(ds[metric], ds[f"{metric}_noiseless"])
 
 
 def _noise_flags(data: dict, dims, rows) -> None:
     """Add ``<metric>_noise_dominated`` (int8) to ``data`` from per-case selections ``rows``."""
     for metric in METRICS:
         flags = np.array([noise_dominated(row, metric).values for row in rows], dtype=np.int8)
-        data[f"{metric}_noise_dominated"] = (
-            dims,
-            flags,
-            {
-                "units": "1",
-                "long_name": f"1 where {metric} departs by more than {NOISE_DOMINATED:.0%} from the same "
-                "selection on the noiseless frames (noise-dominated, not drawn)",
-            },
-        )
+        data[f"{metric}_noise_dominated"] = (dims, flags, noise_flag_attrs(metric))
 
 
 def _drawn(values: xr.Dataset, metric: str) -> np.ndarray:
@@ -350,7 +340,11 @@ def quality_vs_parameter_data(settings: FigureSettings, datasets) -> xr.Dataset:
         data,
         coords={
             "series": ("series", label, {"long_name": "the other parameters' values"}),
-            "x": ("x", x_values if numeric else [str(x) for x in x_values], {"long_name": parameter}),
+            "x": (
+                "x",
+                x_values if numeric else [str(x) for x in x_values],
+                {"long_name": parameter, **({"units": key_units(parameter)} if numeric else {})},
+            ),
             "criterion": ("criterion", criteria, {"long_name": "selection criterion"}),
             "fraction": ("fraction", fractions, {"units": "1", "long_name": "fraction of frames selected"}),
             "case": (("series", "x"), cases, {"long_name": "the case of each point"}),

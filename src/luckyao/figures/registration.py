@@ -68,7 +68,8 @@ def registration_data(settings: FigureSettings, datasets) -> xr.Dataset:
     for method in methods:
         chosen = [ds.sel(registration=method) for ds in datasets]
         per_metric = [signal_data(_with_metric(settings, metric), chosen) for metric in REGISTRATION_METRICS]
-        per_method.append(xr.merge(per_metric, compat="override", combine_attrs="drop"))
+        # each variable keeps its attributes; the datasets' own (their metric) differ and go
+        per_method.append(xr.merge(per_metric, compat="override", combine_attrs="drop_conflicts"))
     ds = xr.concat(per_method, dim="registration", data_vars="all", coords="minimal", compat="override")
     ds = ds.assign_coords(registration=("registration", methods, {"long_name": "registration method"}))
     for metric in REGISTRATION_METRICS:
@@ -116,8 +117,8 @@ def knees(ds: xr.Dataset, metric: str) -> xr.DataArray:
         out.reshape(inside.shape[:-1]),
         dims=inside.dims[:-1],
         attrs={
-            "units": "photon",
-            "long_name": f"detected photons per frame from which {metric} stays within "
+            "units": "1",
+            "long_name": f"detected photons per frame (a count) from which {metric} stays within "
             f"{abs(1 - tolerance):.0%} of the noiseless detector's (NaN: never)",
         },
     )

@@ -90,7 +90,8 @@ class FigureSettings:
     sweep: str = ""
     parameter: str = ""
     sweep_points: tuple = ()
-    """((case, {key path: value}), ...) of a sweep figure, in grid order."""
+    """((case, {key path: value}), ...) of a sweep figure, in grid order, each point's paths in the
+    sweep's order (given as (path, value) pairs: the settings' JSON keeps their order)."""
     sweep_detectors: dict = field(default_factory=dict)
 
     @classmethod

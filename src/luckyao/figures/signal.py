@@ -3,7 +3,7 @@
 import numpy as np
 import xarray as xr
 
-from .quality import NOISE_DOMINATED
+from ..lucky.dataset import NOISE_DOMINATED, noise_dominated, noise_flag_attrs
 from .settings import FigureSettings, case_coords
 from .style import AO_STYLE, CRITERIA, MARKERS, METRICS, SCREEN_INCHES, colour, new_figure, with_error
 
@@ -25,7 +25,7 @@ def signal_data(settings: FigureSettings, datasets) -> xr.Dataset:
     """Integrated-image quality (first target) vs detected photons per frame over the
     detector sweep, per case, criterion, fraction and read noise, of one registration; with
     the score of the same selection and shifts on the noiseless frames, the noiseless
-    detector's, and where the value is noise-dominated (:data:`.quality.NOISE_DOMINATED`)."""
+    detector's, and where the value is noise-dominated (:func:`luckyao.lucky.dataset.noise_dominated`)."""
     metric, criteria, fractions = settings.metric, list(settings.criteria), list(settings.fractions)
     read_noise = list(settings.read_noise_e)
     first = datasets[0]
@@ -61,16 +61,8 @@ def signal_data(settings: FigureSettings, datasets) -> xr.Dataset:
     if f"{metric}_noiseless" in first:
         clean = table(f"{metric}_noiseless")
         data[f"{metric}_noiseless"] = (dims, clean, dict(first[f"{metric}_noiseless"].attrs))
-        flags = ~(np.abs(data[metric][1] - clean) <= NOISE_DOMINATED * np.abs(clean))
-        data[f"{metric}_noise_dominated"] = (
-            dims,
-            flags.astype(np.int8),
-            {
-                "units": "1",
-                "long_name": f"1 where {metric} departs by more than {NOISE_DOMINATED:.0%} from the same "
-                "selection on the noiseless frames (noise-dominated, not drawn)",
-            },
-        )
+        flags = noise_dominated(data[metric][1], clean)
+        data[f"{metric}_noise_dominated"] = (dims, flags.astype(np.int8), noise_flag_attrs(metric))
     noiseless = first.detector[np.isnan(first.photons_per_frame.values)].values
     if noiseless.size:
         reference = [
@@ -94,8 +86,12 @@ def signal_data(settings: FigureSettings, datasets) -> xr.Dataset:
             **case_coords(settings, datasets),
             "criterion": ("criterion", criteria, {"long_name": "selection criterion"}),
             "fraction": ("fraction", fractions, {"units": "1", "long_name": "fraction of frames selected"}),
-            "read_noise": ("read_noise", read_noise, {"units": "electron", "long_name": "read noise rms per pixel"}),
-            "signal": ("signal", signal, {"units": "photon", "long_name": "detected photons per lucky frame"}),
+            "read_noise": (
+                "read_noise",
+                read_noise,
+                {"units": "1", "long_name": "read noise rms per pixel in electrons"},
+            ),
+            "signal": ("signal", signal, {"units": "1", "long_name": "detected photons per lucky frame (a count)"}),
         },
         attrs={"metric": metric},
     )

@@ -41,7 +41,11 @@ def asterism_data(settings: FigureSettings, datasets=()) -> xr.Dataset:
                 coverage,
                 {"units": "1", "long_name": "fraction of the target footprint seen by a beacon"},
             ),
-            "beacon_height_m": ("case", [c.lgs.height_m for c in cases], {"units": "m", "long_name": "beacon height"}),
+            "beacon_height_m": (
+                "case",
+                [c.lgs.height_m for c in cases],
+                {"units": "m", "long_name": "beacon height above the telescope", "standard_name": "height"},
+            ),
             "telescope_diameter_m": (
                 (),
                 cases[0].telescope.diameter_m,
@@ -60,8 +64,12 @@ def asterism_data(settings: FigureSettings, datasets=()) -> xr.Dataset:
         },
         coords={
             "case": ("case", list(settings.cases), {"long_name": "case"}),
-            "layer_height_m": ("layer_height_m", heights, {"units": "m", "long_name": "layer height"}),
-            "beacon": ("beacon", np.arange(n_beacons), {"long_name": "beacon index"}),
+            "layer_height_m": (
+                "layer_height_m",
+                heights,
+                {"units": "m", "long_name": "layer height above the telescope", "standard_name": "height"},
+            ),
+            "beacon": ("beacon", np.arange(n_beacons), {"units": "1", "long_name": "beacon index"}),
         },
     )
 

@@ -245,6 +245,7 @@ class FrameWriter:
             self._nc.createDimension(dim, size)
         target = self._nc.createVariable("target", "i4", ("target",))
         target[:] = self._targets
+        target.units = "1"
         target.long_name = "index of the target in the case's targets_arcsec"
         for axis in ("y", "x"):
             coord = self._nc.createVariable(axis, "f8", (axis,))

@@ -1,13 +1,49 @@
-"""The CF-style dataset of a lucky-imaging run (:func:`.pipeline.run_lucky`)."""
+"""The CF-style dataset of a lucky-imaging run (:func:`.pipeline.run_lucky`). Its units are
+UDUNITS-2's: a count (photons, electrons, pixels) is ``1``, what it counts said in ``long_name``."""
 
 import numpy as np
 import xarray as xr
 
 from .accumulation import TimeBlocks
 
+NOISE_DOMINATED = 0.3
+"""A noisy detector's value is noise-dominated when it departs from the value of the same
+selection and shifts applied to the noiseless frames by more than this fraction of it."""
+
+NOISE_METRICS = ("strehl", "fwhm_arcsec", "d50_arcsec")
+"""The integrated image's metrics flagged ``<metric>_noise_dominated`` (:func:`add_noise_flags`)."""
+
 
 def _attrs(units: str, long_name: str) -> dict:
     return {"units": units, "long_name": long_name}
+
+
+def noise_dominated(value, clean):
+    """Where ``value`` departs from ``clean`` (the same selection and shifts applied to the
+    noiseless frames) by more than :data:`NOISE_DOMINATED` of it; NaN values are flagged."""
+    return ~(np.abs(value - clean) <= NOISE_DOMINATED * np.abs(clean))
+
+
+def noise_flag_attrs(metric: str) -> dict:
+    """The CF attributes of ``<metric>_noise_dominated``."""
+    return {
+        **_attrs(
+            "1",
+            f"1 where {metric} departs by more than {NOISE_DOMINATED:.0%} from the same selection on the "
+            "noiseless frames (noise-dominated: a noisy detector's Strehl above 1, for one)",
+        ),
+        "flag_values": np.array([0, 1], np.int8),
+        "flag_meanings": "signal_dominated noise_dominated",
+    }
+
+
+def add_noise_flags(ds: xr.Dataset) -> None:
+    """``<metric>_noise_dominated`` (int8, :func:`noise_dominated`) beside each of
+    :data:`NOISE_METRICS` that has its noiseless counterpart ``<metric>_noiseless``."""
+    for metric in NOISE_METRICS:
+        if f"{metric}_noiseless" in ds:
+            flags = noise_dominated(ds[metric], ds[f"{metric}_noiseless"]).astype(np.int8)
+            ds[f"{metric}_noise_dominated"] = flags.transpose(*ds[metric].dims).assign_attrs(noise_flag_attrs(metric))
 
 
 def crop(images: np.ndarray, crop_px: int | None) -> np.ndarray:
@@ -60,12 +96,12 @@ def result_dataset(
         "photons_per_frame": (
             "detector",
             np.array(photons, np.float64),
-            _attrs("photon", "detected photons per frame (NaN: noiseless)"),
+            _attrs("1", "detected photons per frame (a count; NaN: noiseless)"),
         ),
         "read_noise_e": (
             "detector",
             np.array([d.read_noise_e for d in detectors], np.float64),
-            _attrs("electron", "read noise rms per pixel (EMCCD: referred to the input)"),
+            _attrs("1", "read noise rms per pixel in electrons (EMCCD: referred to the input)"),
         ),
         "electron_multiplying": (
             "detector",
@@ -78,7 +114,7 @@ def result_dataset(
                 [np.nan if d.photon_counting_threshold_e is None else d.photon_counting_threshold_e for d in detectors],
                 np.float64,
             ),
-            _attrs("electron", "photon-counting threshold (NaN: none)"),
+            _attrs("1", "photon-counting threshold in electrons (NaN: none)"),
         ),
         "recentring": (
             "recentring",
@@ -113,7 +149,7 @@ def result_dataset(
         "frame_centroid_px": (
             ("detector", "frame", "axis"),
             frame_centroid,
-            _attrs("pixel", "centre of gravity of the detected frame (pixel index)"),
+            _attrs("1", "centre of gravity of the detected frame (pixel index)"),
         ),
         "frame_criterion": (
             ("criterion", "detector", "frame"),
@@ -176,7 +212,7 @@ def add_registration(ds: xr.Dataset, name: str, registered_px: np.ndarray, unreg
         ("detector", "frame", "axis"),
         registered_px,
         _attrs(
-            "pixel",
+            "1",
             f"position of the frame's image by registration {name} (pixel index; NaN: not registered, not shifted)",
         ),
     )
@@ -217,8 +253,8 @@ def add_images(
     unit_long = np.stack([_over_flux(image, m, f) for image, f in zip(long_images, long_flux)])
     offsets = np.arange(m) - m // 2
     ds = ds.assign_coords(
-        y=("y", offsets, _attrs("pixel", "row offset from the optical axis pixel (n/2)")),
-        x=("x", offsets, _attrs("pixel", "column offset from the optical axis pixel (n/2)")),
+        y=("y", offsets, _attrs("1", "row offset from the optical axis pixel (n/2), in pixels")),
+        x=("x", offsets, _attrs("1", "column offset from the optical axis pixel (n/2), in pixels")),
     )
     n = long_images[0].shape[-1]  # the long exposure without recentring: always the whole frame
     held = f"the central {m} x {m} pixels of the whole frame" if m < n else "the whole frame"

@@ -15,9 +15,11 @@ import xarray as xr
 
 from ..io.datasets import iter_frame_blocks, open_dataset, provenance, require_finite_lucky, write_dataset
 from ..lucky.accumulation import batch_mean_error
+from ..lucky.dataset import add_noise_flags
 from ..lucky.pipeline import ImageReference, run_lucky_methods
 from ..lucky.ranking import ExternalCriterion
 from ..seeds import target_seed
+from ..studyspec.lucky import by_signal
 from ..studyspec.lucky_settings import LuckySettings
 from .screens import read_screens
 from .simulation import Replay
@@ -138,6 +140,10 @@ def lucky_case(
         )
     )
     ds.attrs.pop("frames_drawn_again", None)  # per target: in its log line
+    add_noise_flags(ds)  # where a noisy detector's scores are noise-dominated
+    # computed in the settings' order (names as text: a detector's last bits depend on its place
+    # in the stacks the BLAS products score), stored by signal
+    ds = ds.sel(detector=by_signal(settings_config["detectors"]))
     ds["reference_target"] = (
         (),
         -1 if reference is None else reference,

@@ -114,7 +114,7 @@ def write_screens(spec_config: dict, screens_path, metadata_path, attrs: dict, t
             list(pool.map(generate, sorted(range(len(specs)), key=lambda i: -sizes[i]), [flat] * len(specs)))
         flat.flush()
         del flat
-    layer = xr.Variable(("layer",), np.arange(len(specs)), {"long_name": "layer index"})
+    layer = xr.Variable(("layer",), np.arange(len(specs)), {"units": "1", "long_name": "layer index"})
     ds = xr.Dataset(
         {
             "dx_m": ("layer", [s.dx_m for s in specs], {"units": "m", "long_name": "screen sample spacing"}),

@@ -71,6 +71,20 @@ def sweep_cases(lucky: dict) -> list[str]:
     return list(sweep.get("cases", default))
 
 
+def by_signal(detectors: dict) -> list[str]:
+    """The names of ``detectors`` (name -> detector) in the order of ``lucky.nc``'s ``detector``:
+    the noiseless first, then by read noise and, within one, by detected photons per frame
+    (``rn0.1_10ph`` before ``rn0.1_100ph``, not as text); ties by name. The settings reach the
+    job as canonical JSON, its keys sorted as text: the job computes in that order (a detector's
+    values depend on its place in the stacks, in their last bits) and stores in this one."""
+
+    def signal(name: str) -> tuple:
+        photons = detectors[name]["photons_per_frame"]
+        return (photons is not None, detectors[name]["read_noise_e"], photons or 0.0, name)
+
+    return sorted(detectors, key=signal)
+
+
 def sweep_name(read_noise_e: float, photons_per_frame: float) -> str:
     return f"rn{read_noise_e:g}_{photons_per_frame:.3g}ph"
 

@@ -118,3 +118,13 @@ def case_defaults(block: str) -> dict:
     ``threshold``, ``calibration``, ...; ``telescope``: the size-scaling parameters): their one home."""
     keys = load_schema()["definitions"]["case"]["properties"][block]["properties"]
     return {key: spec["default"] for key, spec in keys.items() if "default" in spec}
+
+
+KEY_UNITS = (("_m_s", "m s-1"), ("_arcsec", "arcsec"), ("_nm", "nm"), ("_deg", "degree"), ("_m", "m"), ("_s", "s"))
+"""A config key's units from its name's suffix (units in names: ``r0_500nm_m`` is in metres), in UDUNITS syntax."""
+
+
+def key_units(key: str) -> str:
+    """The UDUNITS units of a (dotted) config key's value (:data:`KEY_UNITS`); ``1`` for a number without units."""
+    leaf = key.rsplit(".", 1)[-1]
+    return next((units for suffix, units in KEY_UNITS if leaf.endswith(suffix)), "1")
