@@ -125,6 +125,15 @@ def quality_vs_diameter_data(settings: FigureSettings, datasets) -> xr.Dataset:
     )
 
 
+def _probability_bars(cell: xr.Dataset) -> list[np.ndarray]:
+    """The lucky-frame probability's error bars below and above: its Wilson interval, or in a
+    dataset drawn before it had one (the published 10 s run) the batch-means error both ways."""
+    p = cell.lucky_probability.values
+    if "lucky_probability_low" in cell:
+        return [p - cell.lucky_probability_low.values, cell.lucky_probability_high.values - p]
+    return [cell.lucky_probability_error.values] * 2
+
+
 def draw_quality_vs_diameter(ds: xr.Dataset, title: str):
     """A row per criterion: Strehl and d50 vs diameter (a colour per series, a line style per
     fraction); a last column: the probability of a lucky frame (a line style per threshold)."""
@@ -150,7 +159,7 @@ def draw_quality_vs_diameter(ds: xr.Dataset, title: str):
             ax.errorbar(
                 x,
                 p,
-                yerr=[p - cell.lucky_probability_low.values, cell.lucky_probability_high.values - p],
+                yerr=_probability_bars(cell),
                 color=colour(s),
                 ls=LINE_STYLES[k % 4],
                 marker=MARKERS[k % 8],
