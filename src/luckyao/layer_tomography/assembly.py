@@ -26,8 +26,8 @@ def build_tomography(
     samples_per_subaperture: int = 2,
 ) -> LayerTomography:
     """:class:`.solver.LayerTomography` on grids covering every beacon and target (directions
-        (n, 2) [rad]) on the prior's layers; the prior matched at ``match_frequency_per_m`` [1/m]
-        (default the WFS's Nyquist frequency ``1 / (2 d)``); ``samples_per_subaperture`` pupil samples
+    (n, 2) [rad]) on the prior's layers; the prior matched at ``match_frequency_per_m`` [1/m]
+    (default the WFS's Nyquist frequency ``1 / (2 d)``); ``samples_per_subaperture`` pupil samples
     across a sub-aperture (2: layers at half the sub-aperture pitch, cone-scaled; 1: Fried geometry at the
     sub-aperture pitch, 40-60 % more DM-fitted residual than the dense path on the study's systems)."""
     d = wfs.subaperture_m

@@ -9,7 +9,7 @@ coupling of layers at the same frequency: with the cone-scaled layer pitch (:mod
 (``k`` in cycles per sample, ``o_bl`` the stencil's integer offset and ``f`` its fraction), and the
 gradient's symbol ``g(k) = |G_x|^2 + |G_y|^2``, ``|G_x| = 2 |sin(pi o k_x)| |E(k_y)| / d`` with ``E`` the
 edge mean's symbol (``cos(pi k)`` for ``o = 1`` pupil samples per sub-aperture, Fried geometry: exact on
-a periodic grid; ``cos^2(pi k)`` for ``o = 2``, whose slopes sample every other point: weight ``1/o^2``). So
+a periodic grid; ``cos^2(pi k)`` for ``o = 2``, whose slopes sample every other point: weight ``1/o^2``). So::
 
     A(k) = (1 / sigma^2) (g(k) / o^2) sum_b T_b(k)^* T_b(k)^T + diag_l(w_l |L_l(k)|^2)
 
