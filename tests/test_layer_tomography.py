@@ -111,6 +111,19 @@ def test_preconditioner_is_the_operator_in_fourier_space():
         np.testing.assert_allclose(centre, 1 / tomo.preconditioner.inverse[0, 0, iy, ix].real, rtol=1e-6)
 
 
+def test_preconditioned_spectrum_is_bounded_above():
+    """The largest eigenvalue of ``M^-1 A`` (power iteration on a small system) stays near 1: the
+    preconditioner never under-estimates the operator much. Measured 1.93 (the slopes' two-sample
+    stride); with a prior zero beyond the grid's edge instead of periodic, 2.8e4 (the layers' piston)."""
+    tomo = small_tomography()
+    vector = np.random.default_rng(5).normal(size=tomo.operator.grids.shape)
+    for _ in range(300):
+        vector = tomo.preconditioner.apply(tomo.normal(vector))
+        largest = np.linalg.norm(vector)
+        vector /= largest
+    assert 1.0 < largest < 2.5
+
+
 def test_pcg_converges_to_the_direct_sparse_solve():
     """On a small system the preconditioned, warm-startable PCG reaches scipy's sparse direct
     solution of the same normal equations, ``H^T N^-1 H + C^-1`` assembled as sparse matrices."""
@@ -159,13 +172,14 @@ def test_phase_is_recovered_at_the_right_height():
     assert all(best < 0.6 * other for other in errors.values())
 
 
-@pytest.mark.parametrize("diameter_m, n_sub, tolerance", [(4.2, 8, 0.10), (8.2, 16, 0.15)])
-def test_dm_corrected_residual_agrees_with_the_dense_path(diameter_m, n_sub, tolerance, monkeypatch):
+@pytest.mark.parametrize("diameter_m, n_sub", [(4.2, 8), (8.2, 16)])
+def test_dm_corrected_residual_agrees_with_the_dense_path(diameter_m, n_sub, monkeypatch):
     """The same slopes (the known 4.5 km layer seen by the 4 Rayleigh LGS) through the dense command
-    matrix and through the layer tomography (default tolerance) then the DM fit: the tilt-removed
-    residual of the DM-corrected layer on axis. Measured: 1.07 and 1.12 times the dense residual
-    (4.6 % and 5.9 % when converged to 1e-6): the bi-harmonic prior is not von Karman's covariance
-    and the layers are bilinear at half the sub-aperture pitch."""
+    matrix and through the layer tomography then the DM fit: the tilt-removed residual of the
+    DM-corrected layer on axis. Measured: 1.037 and 1.054 times the dense residual at the default
+    tolerance (3e-4), 1.039 and 1.041 converged (1e-6); asserted within 5 % converged and 7 % at
+    the default. Not the 2 % aimed at: the bi-harmonic prior is not von Karman's covariance (a
+    spectrum k^(1/3) steeper) and the layers are bilinear at half the sub-aperture pitch."""
     telescope = Telescope(diameter_m, round(diameter_m * 2 / 7, 3))
     wfs = ShackHartmann(telescope, n_sub, LGS.wavelength_m)
     monkeypatch.setattr(known, "WFS", wfs)
@@ -178,11 +192,13 @@ def test_dm_corrected_residual_agrees_with_the_dense_path(diameter_m, n_sub, tol
     noise = 2 * known.NOISE_RAD
     geometry = SlopeGeometry(wfs.subaperture_xy_m, wfs.subaperture_m, LGS.directions_rad, LGS.height_m)
     dense = command_matrix(PRIOR, geometry, noise, dm, "ltao") @ slopes.ravel().astype(np.float32)
-    tomo = build_tomography(PRIOR, wfs, LGS.directions_rad, LGS.height_m, noise)
-    iterative = DmProjection.build(tomo.operator.grids, dm, "ltao").commands(tomo.estimate(slopes))
 
     def residual(commands):
         return np.sqrt(np.mean(tilt.residual(truth - influence @ commands) ** 2))
 
-    assert residual(iterative) < (1 + tolerance) * residual(dense)
     assert residual(dense) < 0.3 * np.sqrt(np.mean(truth**2))  # the correction is real
+    for rtol, tolerance in ((None, 0.07), (1e-6, 0.05)):
+        tomo = build_tomography(PRIOR, wfs, LGS.directions_rad, LGS.height_m, noise, **({"rtol": rtol} if rtol else {}))
+        tomo.max_iterations = 2000
+        iterative = DmProjection.build(tomo.operator.grids, dm, "ltao").commands(tomo.estimate(slopes))
+        assert residual(iterative) < (1 + tolerance) * residual(dense)

@@ -9,7 +9,7 @@ from .preconditioner import FourierPreconditioner
 from .prior import BiharmonicPrior
 from .solver import LayerTomography
 
-DEFAULT_RTOL = 1e-3
+DEFAULT_RTOL = 3e-4
 """PCG stops at ``|b - A x| <= rtol |b|``; see docs/methods/layer-tomography.md for the choice."""
 
 

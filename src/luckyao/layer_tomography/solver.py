@@ -63,7 +63,7 @@ class LayerTomography:
     prior: BiharmonicPrior
     noise: SlopeNoise
     preconditioner: FourierPreconditioner | None
-    rtol: float = 1e-3
+    rtol: float = 3e-4
     max_iterations: int = 200
     iterations: list[int] = field(default_factory=list)
     _previous: np.ndarray | None = None
