@@ -38,6 +38,7 @@ API_MODULES = {
         "luckyao.layer_tomography.solver",
         "luckyao.layer_tomography.projection",
         "luckyao.layer_tomography.assembly",
+        "luckyao.layer_tomography.correction",
     ],
     "Adaptive optics": ["luckyao.ao.dm", "luckyao.ao.control", "luckyao.ao.correction", "luckyao.ao.apodisation"],
     "Lucky imaging": [

@@ -15,6 +15,7 @@ EXPORTS = {
     "solver": ("LayerTomography", "pcg"),
     "projection": ("LineOfSight", "DmProjection", "line_of_sight_matrix"),
     "assembly": ("build_tomography",),
+    "correction": ("LayerCorrection", "layer_estimate_for"),
 }
 """Public objects, by module (imported on first use: :mod:`luckyao.exports`)."""
 
