@@ -34,13 +34,17 @@ def frequencies(n: int) -> tuple[np.ndarray, np.ndarray]:
 
 @dataclass(frozen=True, eq=False)
 class FourierPreconditioner:
-    """``M^-1 r = F^-1 A(k)^-1 F r`` (see the module), ``inverse`` (n_layers, n_layers, n, n//2+1)."""
+    """``M^-1 r = F^-1 A(k)^-1 F r`` (see the module), ``inverse`` (n, n//2+1, n_layers, n_layers)."""
 
     inverse: np.ndarray
     n: int
 
     @classmethod
-    def build(cls, operator: MeasurementOperator, prior: BiharmonicPrior, mean_inverse_noise_rad2: float):
+    def build(
+        cls, operator: MeasurementOperator, prior: BiharmonicPrior, mean_inverse_noise_rad2: float, dtype=np.float64
+    ):
+        """From the operator, the prior and the mean inverse slope variance [1/rad^2]; applied in
+        ``dtype`` (float32: complex64 spectra)."""
         n, n_layers = operator.grids.n, operator.grids.n_layers
         kx, ky = frequencies(n)
         d, o = operator.gradient.subaperture_m, operator.gradient.oversampling
@@ -58,9 +62,8 @@ class FourierPreconditioner:
             system += data_weight[..., None, None] * np.conj(t)[..., :, None] * t[..., None, :]
         prior_symbol = prior.symbol(kx, ky)  # (n_layers, n, n//2+1)
         system[..., np.arange(n_layers), np.arange(n_layers)] += np.moveaxis(prior_symbol, 0, -1)
-        inverse = np.linalg.inv(system)  # (n, n//2+1, L, L)
-        return cls(np.ascontiguousarray(np.moveaxis(inverse, (2, 3), (0, 1))), n)
+        return cls(np.linalg.inv(system).astype(np.result_type(dtype, np.complex64)), n)
 
     def apply(self, residual: np.ndarray) -> np.ndarray:
-        spectrum = scipy.fft.rfft2(residual)
-        return scipy.fft.irfft2(np.einsum("ijyx,jyx->iyx", self.inverse, spectrum), s=(self.n, self.n))
+        spectrum = np.moveaxis(scipy.fft.rfft2(residual), 0, -1)[..., None]  # (n, n//2+1, L, 1)
+        return scipy.fft.irfft2(np.moveaxis(np.matmul(self.inverse, spectrum)[..., 0], -1, 0), s=(self.n, self.n))

@@ -52,11 +52,13 @@ def laplacian(n: int, pitch_m: float, kappa0_per_m: float = 0.0) -> scipy.sparse
 
 @dataclass(frozen=True, eq=False)
 class BiharmonicPrior:
-    """``C^-1 ~ blockdiag_l w_l L_l^T L_l`` on the layer grids, for ``prior`` (its heights are the grids')."""
+    """``C^-1 ~ blockdiag_l w_l L_l^T L_l`` on the layer grids, for ``prior`` (its heights are the
+    grids'), applied in ``dtype``."""
 
     prior: TurbulencePrior
     grids: LayerGrids
     match_frequency_per_m: float
+    dtype: type = np.float64
 
     def __post_init__(self):
         if tuple(self.prior.heights_m) != tuple(self.grids.heights_m):
@@ -87,11 +89,11 @@ class BiharmonicPrior:
 
     def apply(self, layers: np.ndarray) -> np.ndarray:
         """``C^-1 x`` for layers ``(n_layers, n, n)``."""
-        out = np.empty_like(layers)
-        for l, (lap, weight) in enumerate(zip(self.laplacians, self.weights)):
-            flat = layers[l].reshape(-1)
-            out[l] = (weight * (lap.T @ (lap @ flat))).reshape(layers[l].shape)
-        return out
+        return (self._matrix @ layers.reshape(-1)).reshape(layers.shape)
+
+    @cached_property
+    def _matrix(self) -> scipy.sparse.csr_matrix:
+        return self.matrix().astype(self.dtype)
 
     def matrix(self) -> scipy.sparse.csr_matrix:
         """``C^-1`` as a sparse block-diagonal matrix (small systems: tests, direct solves)."""

@@ -56,8 +56,8 @@ def pcg(apply_a, b: np.ndarray, x0: np.ndarray, precondition, rtol: float, max_i
 
 @dataclass(eq=False)
 class LayerTomography:
-    """The layers' MAP estimate from each exposure's slopes, warm-started; ``iterations`` records
-    each solve's count."""
+    """The layers' MAP estimate from each exposure's slopes, warm-started, in ``dtype`` (the
+    prior's and the preconditioner's); ``iterations`` records each solve's count."""
 
     operator: MeasurementOperator
     prior: BiharmonicPrior
@@ -65,6 +65,7 @@ class LayerTomography:
     preconditioner: FourierPreconditioner | None
     rtol: float = 3e-4
     max_iterations: int = 200
+    dtype: type = np.float64
     iterations: list[int] = field(default_factory=list)
     _previous: np.ndarray | None = None
 
@@ -74,7 +75,7 @@ class LayerTomography:
 
     def right_hand_side(self, slopes: np.ndarray) -> np.ndarray:
         """``H^T N^-1 s`` for slopes ``(n_beacons, 2, n_valid)`` [rad]."""
-        return self.operator.adjoint(self.noise.weigh(np.asarray(slopes, dtype=float)))
+        return self.operator.adjoint(self.noise.weigh(np.asarray(slopes, dtype=self.dtype)))
 
     def estimate(self, slopes: np.ndarray) -> np.ndarray:
         """Layers ``(n_layers, n, n)`` [m] of one exposure's tilt-removed slopes, warm-started."""
