@@ -47,6 +47,12 @@ def ground_layers(prior: TurbulencePrior, ground_max_height_m: float | None = No
     return layers
 
 
+def fit_points(dm: DeformableMirror, fit_pitch_m: float | None = None) -> np.ndarray:
+    """Pupil points (n, 2) [m] at which an estimate is fitted onto the DM: pitch ``fit_pitch_m``
+    [m], by default a quarter of the DM pitch (see :func:`command_matrix`)."""
+    return pupil_points(dm.telescope, dm.pitch_m / 4 if fit_pitch_m is None else fit_pitch_m)[2]
+
+
 def command_matrix(
     prior: TurbulencePrior,
     geometry: SlopeGeometry,
@@ -76,8 +82,7 @@ def command_matrix(
         layers, direction = ground_layers(prior, ground_max_height_m), (0.0, 0.0)
     else:
         raise ValueError(f"unknown correction mode {mode!r}; known: {MODES}")
-    pitch = dm.pitch_m / 4 if fit_pitch_m is None else fit_pitch_m
-    _, _, points = pupil_points(dm.telescope, pitch)
+    points = fit_points(dm, fit_pitch_m)
     if cholesky_lower is None:
         cholesky_lower = factorize(slope_covariance(prior, geometry, noise_rms_rad))
     cross = cross_covariance(prior, geometry, points, direction, layer_indices=layers)
