@@ -567,3 +567,11 @@ def test_without_frame_cubes_every_result_is_the_stored_cubes_bit_for_bit(finish
     for telemetry in (tmp_path / "results" / "cases").glob("*/telemetry.nc"):
         with xr.open_dataset(telemetry) as ds:
             assert not ds.imaged.values.any(), telemetry  # the simulation imaged nothing
+
+
+def test_a_figure_asked_for_alone_exports_its_cases_fits(tmp_path):
+    """``bash run.sh study figures/quality.png``: the figure's cases' FITS images come with it."""
+    write_config(tmp_path)
+    result = snakemake(tmp_path, "--dry-run", "figures/quality.png")
+    assert result.returncode == 0, result.stderr
+    assert {w for rule, w in jobs_planned(result) if rule == "export"} == {"case=good", "case=bad"}

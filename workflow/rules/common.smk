@@ -161,12 +161,15 @@ def figure_settings_file(fig):
 FIGURE_SETTINGS = {fig: figure_settings_file(fig) for fig in STUDY["figures"]}
 
 
-def figure_inputs(fig):
-    """The cases' lucky datasets; none for the geometry-only asterism figure."""
+def figure_cases(fig):
+    """The cases whose lucky datasets a figure reads; none for the geometry-only asterism figure."""
     figure = STUDY["figures"][fig]
-    if figure["kind"] == "asterism":
-        return []
-    return [f"results/cases/{c}/lucky.nc" for c in figure["cases"]]
+    return [] if figure["kind"] == "asterism" else list(figure["cases"])
+
+
+def figure_inputs(fig):
+    """The cases' lucky datasets (:func:`figure_cases`)."""
+    return [f"results/cases/{c}/lucky.nc" for c in figure_cases(fig)]
 
 
 DRAWN_CASES = VIEW.drawn

@@ -11,6 +11,8 @@ rule figure:
     input:
         settings=lambda w: FIGURE_SETTINGS[w.fig],
         lucky=lambda w: figure_inputs(w.fig),
+        # a figure asked for alone exports its cases' FITS too; ancient: a new export never redraws it
+        fits=lambda w: [ancient(f"fits/{case}.fits") for case in figure_cases(w.fig)],
         code=step_sources("luckyao.figures"),
     output:
         pdf="figures/{fig}.pdf",
