@@ -43,7 +43,7 @@ def test_a_hostile_detector_and_figure_name_stay_text_in_the_whole_caption():
     assert "<script" not in html
     shown = html.replace("&lt;", "<").replace("&gt;", ">").replace("&quot;", '"').replace("&amp;", "&")
     assert " ".join(HOSTILE[1].split()) in shown and HOSTILE[0] in shown
-    assert "Cases" in html and "no AO, r0 20 cm" in html
+    assert "Cases" in html and "no AO, 4.2 m, r0 20 cm" in html
 
 
 def luckyao(*args):

@@ -459,3 +459,28 @@ def test_vanishing_signal_selects_at_random_but_external_criterion_does_not(cube
     lo, hi = np.quantile(null("faint"), [0.005, 0.995])
     assert lo < got < hi
     assert float(ideal.strehl_noiseless.sel(criterion="strehl", fraction=0.1)) > null("ideal").max()
+
+
+def test_registration_methods_images_cut_to_the_square_they_all_hold():
+    """On a coarse camera (2.5 m: 31 mas pixels) a sub-pixel method keeps its 1.25" crop, 40
+    pixels, against ``image_crop_px`` 64 for ``cog``: ``lucky.nc`` holds the central 40 of both
+    (each over its whole frame's flux, so the values are the same pixels'), not NaN padding."""
+    import xarray as xr
+
+    from luckyao.steps.postprocess import _common_crop
+
+    def method(m, value):
+        offsets = np.arange(m) - m // 2
+        image = np.add.outer(offsets, 100 * offsets).astype(np.float32) + value
+        name = f"integrated image over the whole frame's flux: the central {m} x {m} pixels of the whole frame"
+        return xr.Dataset(
+            {"image": (("y", "x"), image, {"long_name": name}), "strehl": ((), value)},
+            coords={"y": offsets, "x": offsets},
+        )
+
+    cog, xcorr = _common_crop([method(64, 0.0), method(40, 1.0)])
+    assert cog.sizes == xcorr.sizes == {"y": 40, "x": 40}
+    np.testing.assert_array_equal(cog.image.values, method(64, 0.0).image.values[12:52, 12:52])
+    assert "central 40 x 40 pixels" in cog.image.attrs["long_name"]
+    same = [method(64, 0.0), method(64, 1.0)]
+    assert _common_crop(same) is same  # the default camera: untouched

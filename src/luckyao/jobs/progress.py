@@ -30,11 +30,14 @@ _STEPS = re.compile(r"^(\d+) of (\d+) steps \(.*\) done$")
 _STATS_ROW = re.compile(r"^(\w+)\s+(\d+)$")
 _RULE = re.compile(r"^(?:local)?rule (\w+):", re.M)
 _RUNTIME = re.compile(r"^\s+runtime=(\d+(?:\.\d+)?)", re.M)
+_JOB_RUNTIME = re.compile(r"\bruntime=(\d+(?:\.\d+)?)")
+"""A job block's ``resources:`` entry: the runtime Snakemake computed for that job [min]."""
 
 
 def declared_runtimes(rule_dir="workflow/rules") -> dict[str, float]:
     """Each rule's declared ``runtime`` (minutes) in the workflow's rule files; rules without
-    one (the targets ``all``, ``all_cases``) are left out."""
+    one (the targets ``all``, ``all_cases``) or whose runtime is computed per job (simulate,
+    lucky: their first job's, from its block in the log) are left out."""
     runtimes = {}
     for path in sorted(Path(rule_dir).glob("*.smk")):
         text = path.read_text()
@@ -128,6 +131,9 @@ class Progress:
         fields = dict(entry.strip().split(": ", 1) for entry in block[1:] if ": " in entry)
         if "jobid" in fields and self.now is not None:
             self.running[fields["jobid"]] = (rule, self.now)
+        declared = _JOB_RUNTIME.search(fields.get("resources", ""))
+        if declared:  # a rule whose runtime is computed per job (e.g. from the case's size)
+            self.runtimes.setdefault(rule, float(declared.group(1)))
         if self.to_run[rule] > 0:
             self.to_run[rule] -= 1
         if self.started_at is None:
