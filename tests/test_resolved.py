@@ -17,6 +17,7 @@ from luckyao.studyspec.case import Case
 from luckyao.studyspec.overrides import parse_overrides, typed
 from luckyao.studyspec.schema import ConfigError, deep_merge
 from luckyao.studyspec.study import load_study, plausibility_warnings, validate_study
+from luckyao.studyspec.sweeps import expand_sweeps
 from luckyao.studyspec.view import resolve_study
 
 from studies import REPO, snakemake, snakemake_command, tiny
@@ -112,6 +113,20 @@ def test_labels_name_the_diameter_and_the_beacons():
     configs = validate_study(study)
     summary = CaseSummary.of("big", Case.from_config(configs["big"])).summary()
     assert "8 m" in summary and "6 LGS" in summary
+
+
+def test_a_summary_names_every_key_set_apart_from_the_base():
+    """Besides its parts (AO, diameter, r0, WFS, beacons, height, DM), every other key the case
+    sets apart from the base, not the keys it derived (the camera, the obscuration)."""
+    study = tiny()
+    study["cases"]["big"] = {"telescope": {"diameter_m": 8.0}, "ao": {"coupling": 0.25}, "lgs": {"enabled": True}}
+    study["turbulence"].pop("duration_s")
+    view = resolve_study(expand_sweeps(study), validate_study(study))
+    big = view.cases["big"]
+    differences = {k: v for k, v in big.differences.items() if k not in big.derived}
+    summary = CaseSummary.of("big", Case.from_config(big.config), differences).summary()
+    assert summary.endswith("; ao.coupling 0.25") and "8 m" in summary, summary
+    assert "camera" not in summary and "obscuration" not in summary
 
 
 def test_show_names_the_derived_keys():

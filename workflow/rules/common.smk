@@ -140,7 +140,16 @@ def figure_settings(fig):
         # each point's values as (path, value) pairs: in the sweep's order (a dict's keys would be
         # sorted as text in the settings' canonical JSON, and the first parameter is the default x)
         extra["sweep_points"] = [[p.case, list(p.values.items())] for p in sweep_points(STUDY, figure["sweep"])]
-    return {**figure, "seed": STUDY["seed"], "case_configs": {c: CASES[c] for c in figure["cases"]}, **extra}
+    differences = {
+        c: {k: v for k, v in VIEW.cases[c].differences.items() if k not in VIEW.cases[c].derived} for c in figure["cases"]
+    }
+    return {
+        **figure,
+        "seed": STUDY["seed"],
+        "case_configs": {c: CASES[c] for c in figure["cases"]},
+        "case_differences": differences,
+        **extra,
+    }
 
 
 def figure_settings_file(fig):

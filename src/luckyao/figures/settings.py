@@ -7,6 +7,20 @@ from ..studyspec.case import Case
 from ..studyspec.schema import figure_default
 
 
+SUMMARISED = {
+    "ao.mode",
+    "telescope.diameter_m",
+    "atmosphere.r0_500nm_m",
+    "atmosphere.r0_amplitude_m",
+    "wfs.n_subapertures",
+    "lgs.enabled",
+    "lgs.n_beacons",
+    "lgs.height_m",
+    "ao.n_actuators",
+}
+"""The config keys a summary's parts (:meth:`CaseSummary.parts`) already say."""
+
+
 @dataclass(frozen=True)
 class CaseSummary:
     """What tells a case apart in a legend: AO, telescope diameter, r0, LGS WFS, beacons and
@@ -21,9 +35,16 @@ class CaseSummary:
     lgs_height_km: float | None
     diameter_m: float = 4.2
     n_beacons: int | None = None
+    others: tuple[str, ...] = ()
+    """``key value`` of every other key the case sets apart from the base (:data:`SUMMARISED` aside)."""
 
     @classmethod
-    def of(cls, name: str, case: Case) -> "CaseSummary":
+    def of(cls, name: str, case: Case, differences: dict | None = None) -> "CaseSummary":
+        """``differences``: ``{key path: value}`` the case sets apart from the base, not derived
+        (``studyspec.view``)."""
+        others = tuple(
+            f"{path} {value}" for path, value in sorted((differences or {}).items()) if path not in SUMMARISED
+        )
         return cls(
             name=name,
             ao_mode=case.ao.mode,
@@ -34,6 +55,7 @@ class CaseSummary:
             lgs_height_km=case.lgs.height_m / 1e3 if case.lgs else None,
             diameter_m=case.telescope.diameter_m,
             n_beacons=case.lgs.n_beacons if case.lgs else None,
+            others=others,
         )
 
     def parts(self) -> dict[str, str]:
@@ -50,8 +72,10 @@ class CaseSummary:
         return parts
 
     def summary(self) -> str:
-        """Every part: ``LTAO, 4.2 m, r0 13.5 cm, 8x8 WFS, 4 LGS, LGS 22 km, 9x9 DM``."""
-        return ", ".join(self.parts().values())
+        """Every part, then every other key set apart from the base: ``LTAO, 4.2 m, r0 13.5 cm,
+        8x8 WFS, 4 LGS, LGS 90 km, 9x9 DM; lgs.profile gaussian, lgs.wavelength_m 5.89e-07``."""
+        parts = ", ".join(self.parts().values())
+        return f"{parts}; {', '.join(self.others)}" if self.others else parts
 
 
 def short_labels(summaries: list[CaseSummary]) -> list[str]:
@@ -93,6 +117,8 @@ class FigureSettings:
     """((case, {key path: value}), ...) of a sweep figure, in grid order, each point's paths in the
     sweep's order (given as (path, value) pairs: the settings' JSON keeps their order)."""
     sweep_detectors: dict = field(default_factory=dict)
+    case_differences: dict = field(default_factory=dict)
+    """``{case: {key path: value}}``: what each case sets apart from the base (not derived)."""
 
     @classmethod
     def from_dict(cls, settings: dict) -> "FigureSettings":
@@ -112,7 +138,7 @@ class FigureSettings:
         return Case.from_config(self.case_configs[name])
 
     def summaries(self) -> list[CaseSummary]:
-        return [CaseSummary.of(name, self.case(name)) for name in self.cases]
+        return [CaseSummary.of(name, self.case(name), self.case_differences.get(name)) for name in self.cases]
 
 
 def case_coords(settings: FigureSettings, datasets=()) -> dict:
