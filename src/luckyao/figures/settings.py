@@ -6,7 +6,6 @@ from dataclasses import dataclass, field
 from ..studyspec.case import Case
 from ..studyspec.schema import figure_default
 
-
 SUMMARISED = {
     "ao.mode",
     "telescope.diameter_m",
