@@ -141,7 +141,8 @@ def figure_settings(fig):
         # sorted as text in the settings' canonical JSON, and the first parameter is the default x)
         extra["sweep_points"] = [[p.case, list(p.values.items())] for p in sweep_points(STUDY, figure["sweep"])]
     differences = {
-        c: {k: v for k, v in VIEW.cases[c].differences.items() if k not in VIEW.cases[c].derived} for c in figure["cases"]
+        c: {k: v for k, v in VIEW.cases[c].differences.items() if k not in VIEW.cases[c].derived}
+        for c in figure["cases"]
     }
     return {
         **figure,
