@@ -389,6 +389,8 @@ def preflight(view: ResolvedStudy, folder=".", memory_bytes: float | None = None
         frames = (
             "every frame cube kept (keep_frames: true)"
             if keep_frames
+            else "no frame cube (replay_frames: true)"
+            if replay
             else f"the {len(passing)} largest frame cubes at once (each deleted once post-processed)"
         )
         largest = max(kept + passing, key=lambda p: p[3])
