@@ -463,24 +463,26 @@ def test_vanishing_signal_selects_at_random_but_external_criterion_does_not(cube
 
 def test_registration_methods_images_cut_to_the_square_they_all_hold():
     """On a coarse camera (2.5 m: 31 mas pixels) a sub-pixel method keeps its 1.25" crop, 40
-    pixels, against ``image_crop_px`` 64 for ``cog``: ``lucky.nc`` holds the central 40 of both
-    (each over its whole frame's flux, so the values are the same pixels'), not NaN padding."""
+    pixels, against ``image_crop_px`` 64 for ``cog``: every method's images are the central 40
+    (each over its whole frame's flux, so the values are the same pixels'), one square along
+    ``lucky.nc``'s registration, not NaN padding; the 4.2 m camera keeps its 64."""
     import xarray as xr
 
-    from luckyao.steps.postprocess import _common_crop
+    from luckyao.lucky.cropped import crop_px
+    from luckyao.lucky.dataset import add_images
+    from luckyao.optics.imaging import Camera
+    from luckyao.studyspec.lucky_settings import shared_image_crop_px
 
-    def method(m, value):
-        offsets = np.arange(m) - m // 2
-        image = np.add.outer(offsets, 100 * offsets).astype(np.float32) + value
-        name = f"integrated image over the whole frame's flux: the central {m} x {m} pixels of the whole frame"
-        return xr.Dataset(
-            {"image": (("y", "x"), image, {"long_name": name}), "strehl": ((), value)},
-            coords={"y": offsets, "x": offsets},
-        )
-
-    cog, xcorr = _common_crop([method(64, 0.0), method(40, 1.0)])
-    assert cog.sizes == xcorr.sizes == {"y": 40, "x": 40}
-    np.testing.assert_array_equal(cog.image.values, method(64, 0.0).image.values[12:52, 12:52])
+    coarse, default = Camera(8e-7, 160, 5.0 / 160), Camera(8e-7, 256, 5.0 / 256)
+    assert crop_px(160, 5.0 / 160) == 40 and crop_px(256, 5.0 / 256) == 64
+    assert shared_image_crop_px(64, ["cog", "xcorr"], coarse) == 40
+    assert shared_image_crop_px(64, ["cog", "xcorr"], default) == 64  # the default study: unchanged
+    assert shared_image_crop_px(64, ["cog"], coarse) == 64 and shared_image_crop_px(0, ["cog", "xcorr"], coarse) == 0
+    m = shared_image_crop_px(None, ["cog", "xcorr"], coarse)
+    rng = np.random.default_rng(1)
+    whole, cropped = rng.random((1, 1, 1, 160, 160)), rng.random((1, 1, 1, 40, 40))
+    cog = add_images(xr.Dataset(), whole, [whole[0, 0]], m, np.ones((1, 1, 1)), [np.ones(1)])
+    xcorr = add_images(xr.Dataset(), cropped, [whole[0, 0]], m, np.ones((1, 1, 1)), [np.ones(1)])
+    assert cog.sizes["y"] == xcorr.sizes["y"] == cog.sizes["x"] == 40
+    np.testing.assert_array_equal(cog.image.values[0, 0, 0], whole[0, 0, 0, 60:100, 60:100].astype(np.float32))
     assert "central 40 x 40 pixels" in cog.image.attrs["long_name"]
-    same = [method(64, 0.0), method(64, 1.0)]
-    assert _common_crop(same) is same  # the default camera: untouched

@@ -47,10 +47,10 @@ def series_points(settings: FigureSettings) -> tuple[list[str], list[float], dic
     return list(dict.fromkeys(labels)), sorted(set(diameters)), where
 
 
-def _first_target_cog(values: xr.DataArray) -> xr.DataArray:
-    """The first target's values, of the baseline registration (``cog``), where they have those dimensions."""
-    values = values.isel(target=0) if "target" in values.dims else values
-    return values.sel(registration="cog") if "registration" in values.dims else values
+def _first_target(values: xr.DataArray) -> xr.DataArray:
+    """The first target's values (the datasets arrive on the baseline registration,
+    ``figures.baseline_registration``)."""
+    return values.isel(target=0) if "target" in values.dims else values
 
 
 def quality_vs_diameter_data(settings: FigureSettings, datasets) -> xr.Dataset:
@@ -66,13 +66,13 @@ def quality_vs_diameter_data(settings: FigureSettings, datasets) -> xr.Dataset:
         for name in with_error(datasets, metric):
             table = np.full(shape + (len(criteria), len(fractions)), np.nan)
             for (label, diameter), i in where.items():
-                table[series.index(label), x_values.index(diameter)] = _first_target_cog(
+                table[series.index(label), x_values.index(diameter)] = _first_target(
                     datasets[i][name].sel(criterion=criteria, fraction=fractions, detector=settings.detector)
                 ).values
             data[name] = (("series", "diameter", "criterion", "fraction"), table, dict(datasets[0][name].attrs))
     counts = np.full(shape + (len(fractions),), -1, dtype=np.int64)
     for (label, diameter), i in where.items():
-        counts[series.index(label), x_values.index(diameter)] = _first_target_cog(
+        counts[series.index(label), x_values.index(diameter)] = _first_target(
             datasets[i].n_frames_selected.sel(fraction=fractions)
         )
     data["n_frames_selected"] = (
@@ -83,7 +83,7 @@ def quality_vs_diameter_data(settings: FigureSettings, datasets) -> xr.Dataset:
     names = ("fraction", "low", "high", "n_effective", "n_frames")
     lucky = {name: np.full(shape + (len(thresholds),), np.nan) for name in names}
     for (label, diameter), i in where.items():
-        frames = _first_target_cog(datasets[i]["frame_strehl"].sel(detector=settings.detector))
+        frames = _first_target(datasets[i]["frame_strehl"].sel(detector=settings.detector))
         cell = series.index(label), x_values.index(diameter)
         for k, threshold in enumerate(thresholds):
             found = lucky_fraction(frames.values, threshold, datasets[i].sizes.get("block", 0))

@@ -9,7 +9,6 @@ figures need from the telemetry: the long-exposure Strehl's Monte-Carlo error
 
 import json
 import logging
-import re
 
 import numpy as np
 import xarray as xr
@@ -80,24 +79,6 @@ def _external_criteria(telemetry: xr.Dataset, target: int) -> list[ExternalCrite
     return external
 
 
-def _common_crop(datasets: list[xr.Dataset]) -> list[xr.Dataset]:
-    """The registration methods' datasets with their images cut to the central square they all
-    hold: a sub-pixel method keeps at most its 1.25" crop (:mod:`luckyao.lucky.cropped`), fewer
-    pixels than ``image_crop_px`` on a coarse camera (40 at 2.5 m against 64); each image is over
-    its whole frame's flux, so a smaller crop keeps its values. Unchanged when they agree."""
-    if "y" not in datasets[0].dims or len({ds.sizes["y"] for ds in datasets}) == 1:
-        return datasets
-    m = min(ds.sizes["y"] for ds in datasets)
-    offsets = np.arange(m) - m // 2
-    cropped = [ds.sel(y=offsets, x=offsets) for ds in datasets]
-    for ds in cropped:
-        for name in (v for v in ds.data_vars if "y" in ds[v].dims):
-            held = f"the central {m} x {m} pixels of the whole frame"
-            text = re.sub(r"the central \d+ x \d+ pixels of the whole frame", held, ds[name].attrs["long_name"])
-            ds[name].attrs["long_name"] = re.sub(r": the whole frame\b", f": {held}", text)
-    return cropped
-
-
 def lucky_case(
     settings_config: dict, frames_path, telemetry_path, out_path, screens_path="", screens_metadata_path=""
 ) -> None:
@@ -146,9 +127,7 @@ def lucky_case(
         )
         for m in range(len(registrations))
     ]
-    ds = xr.concat(
-        _common_crop(per_registration), dim="registration", data_vars="all", coords="minimal", compat="override"
-    )
+    ds = xr.concat(per_registration, dim="registration", data_vars="all", coords="minimal", compat="override")
     ds = ds.assign_coords(
         registration=(
             "registration",

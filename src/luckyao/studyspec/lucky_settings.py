@@ -7,6 +7,7 @@ The dict comes from ``studyspec.lucky.lucky_settings`` (validated; defaults in `
 from dataclasses import dataclass
 
 from ..io.hashing import canonical_json
+from ..lucky.cropped import crop_px
 from ..lucky.detector import Detector
 from ..lucky.registration import Registration, search_px
 from ..lucky.scoring import MatchedStrehl
@@ -14,6 +15,17 @@ from ..optics.imaging import Imager
 from .case import Case
 from .lucky import error_blocks, frame_strehl, image_crop_px, registrations
 from .resolved import imaged_targets
+
+
+def shared_image_crop_px(configured: int | None, methods, camera) -> int | None:
+    """The integrated images' crop every registration method can keep: ``lucky.image_crop_px``
+    (None: the whole frame; 0: no images), at most a sub-pixel method's crop when one runs
+    (:func:`luckyao.lucky.cropped.crop_px`, 1.25": 40 pixels at 2.5 m against 64, 64 at 4.2 m),
+    so that the methods' images share one square along ``lucky.nc``'s registration."""
+    if configured == 0 or all(name == "cog" for name in methods):
+        return configured
+    held = crop_px(camera.n_pixels, camera.pixel_scale_arcsec)
+    return held if configured is None else min(configured, held)
 
 
 @dataclass(frozen=True)
@@ -34,7 +46,8 @@ class LuckySettings:
     """The targets whose frames the simulation stored (none with ``replay_frames``: each is replayed)."""
     reference_target: int | None
     image_crop_px: int | None
-    """Pixels across the integrated images kept (None: the whole frame)."""
+    """Pixels across the integrated images kept (None: the whole frame; 0: none), the same for
+    every registration method (:func:`shared_image_crop_px`)."""
     registrations: tuple[str, ...]
     """The registration methods (:mod:`luckyao.lucky.registration`), ``cog`` among them."""
     frame_strehl: str
@@ -46,10 +59,11 @@ class LuckySettings:
     def from_settings(cls, settings: dict) -> "LuckySettings":
         """From a ``studyspec.lucky.lucky_settings`` dict."""
         case = settings["case_config"]
+        physics = Case.from_config(case)
         return cls(
             case_name=settings["case"],
             case_config=case,
-            case=Case.from_config(case),
+            case=physics,
             seed=settings["seed"],
             fractions=tuple(settings["fractions"]),
             detectors=tuple(
@@ -65,7 +79,7 @@ class LuckySettings:
             error_blocks=error_blocks(settings),
             imaged_targets=() if settings.get("replay_frames", False) else tuple(imaged_targets(case)),
             reference_target=case.get("reference_target"),
-            image_crop_px=image_crop_px(settings),
+            image_crop_px=shared_image_crop_px(image_crop_px(settings), registrations(settings), physics.camera),
             registrations=tuple(registrations(settings)),
             frame_strehl=frame_strehl(settings),
             settings_json=canonical_json({k: v for k, v in settings.items() if k != "case_config"}),
