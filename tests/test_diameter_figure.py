@@ -12,12 +12,14 @@ from luckyao.studyspec.study import load_study, validate_study
 from synthetic import lucky_dataset
 
 CONFIG = Path(__file__).resolve().parents[1] / "config"
+DIAMETER_FULL = (CONFIG / "config.yaml", CONFIG / "diameter.yaml", CONFIG / "diameter_full.yaml")
+"""The telescope study with every series at every size (diameter_full: the 16 m scaled asterism too)."""
 N_FRAMES, N_BLOCKS = 100, 5
 
 
 @pytest.fixture(scope="module")
 def figure():
-    config, _ = load_study(CONFIG / "config.yaml", CONFIG / "diameter.yaml")
+    config, _ = load_study(*DIAMETER_FULL)
     cases = validate_study(config)
     spec = config["figures"]["diameter"]
     settings = FigureSettings.from_dict({**spec, "case_configs": {c: cases[c] for c in spec["cases"]}})
@@ -67,7 +69,7 @@ def test_lucky_frame_probability_and_its_wilson_interval(figure):
 def test_a_probability_of_no_lucky_frame_has_a_nonzero_interval(figure):
     """Frames uniform in [0, 0.3]: none above 0.5; the interval still reaches up."""
     spec, frames, ds, _ = figure
-    config, _ = load_study(CONFIG / "config.yaml", CONFIG / "diameter.yaml")
+    config, _ = load_study(*DIAMETER_FULL)
     cases = validate_study(config)
     settings = FigureSettings.from_dict(
         {**spec, "strehl_thresholds": [0.5], "case_configs": {c: cases[c] for c in spec["cases"]}}
@@ -80,7 +82,7 @@ def test_a_probability_of_no_lucky_frame_has_a_nonzero_interval(figure):
 
 
 def test_series_labels_name_a_series_by_case():
-    config, _ = load_study(CONFIG / "config.yaml", CONFIG / "diameter.yaml")
+    config, _ = load_study(*DIAMETER_FULL)
     cases = validate_study(config)
     names = ["ltao_r0_13.5cm", "ltao_r0_15cm"]  # both LTAO, 22 km, 4.2 m: apart only as named series
     settings = FigureSettings.from_dict(
@@ -105,7 +107,7 @@ def test_it_draws(figure):
 
 
 def test_two_cases_at_one_point_are_refused():
-    config, _ = load_study(CONFIG / "config.yaml", CONFIG / "diameter.yaml")
+    config, _ = load_study(*DIAMETER_FULL)
     cases = validate_study(config)
     names = ["ltao_r0_13.5cm", "ltao_r0_15cm"]  # both LTAO, 22 km, 4.2 m
     settings = FigureSettings.from_dict(

@@ -62,3 +62,16 @@ def test_lucky_fraction_counts_frames_above_the_threshold():
     found = lucky_fraction(values, 0.2, 5)
     assert found["fraction"] == 0.5 and found["n_frames"] == 100
     assert found["low"] < 0.5 < found["high"]
+
+
+def test_the_interval_holds_the_fraction_at_no_and_every_frame():
+    """At a count of 0 or N the bound on that side is the fraction itself, not 1e-20 beyond it
+    (rounding of the centre against the half-width: an error bar of negative length)."""
+    n = np.concatenate([np.arange(1.0, 2000.0), np.geomspace(2000, 1e7, 500)])
+    low, high = wilson_interval(np.zeros_like(n), n)
+    assert (low == 0).all() and (high > 0).all()
+    low, high = wilson_interval(np.ones_like(n), n)
+    assert (high == 1).all() and (low < 1).all()
+    p = np.linspace(0, 1, 101)[:, None]
+    low, high = wilson_interval(p, n[None, :])
+    assert (low <= p).all() and (p <= high).all()

@@ -45,12 +45,13 @@ def test_the_shipped_configs_keep_their_keys():
         (None, "ltao_r0_13.5cm", "13fd59ebbeb1f5a2"),  # the sweep, from lucky.detector_sweep.cases
         (None, "glao_r0_13.5cm", "f4557aeb3f6b1982"),  # none
         ("diameter.yaml", "ltao_r0_13.5cm", "ce18bb9d2370f49a"),
-        ("diameter.yaml", "ltao_D16m", "c9a4e3e82da3aa66"),
+        (("diameter.yaml", "diameter_full.yaml"), "ltao_D16m", "c9a4e3e82da3aa66"),
     ],
 )
 def test_the_detector_sweep_as_a_config_field_keeps_the_lucky_hashes(overlay, case, lucky_sha256):
     """Each case's lucky settings hash as when the sweep was given by the figures that draw it."""
-    paths = [REPO / "config" / "config.yaml"] + ([REPO / "config" / overlay] if overlay else [])
+    overlays = (overlay,) if isinstance(overlay, str) else overlay or ()
+    paths = [REPO / "config" / "config.yaml"] + [REPO / "config" / name for name in overlays]
     study, _ = load_study(*paths)
     assert sha256(view_of(study).cases[case].lucky_settings)[:16] == lucky_sha256
 

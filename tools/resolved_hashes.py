@@ -16,6 +16,7 @@ STUDIES = {
     "default": ["config/config.yaml"],
     "paper": ["config/config.yaml", "config/paper.yaml"],
     "diameter": ["config/config.yaml", "config/diameter.yaml"],
+    "diameter_full": ["config/config.yaml", "config/diameter.yaml", "config/diameter_full.yaml"],
     "apodisation": ["config/config.yaml", "config/apodisation.yaml"],
     "uncalibrated": ["config/config.yaml", "config/uncalibrated.yaml"],
     "tiny": ["tests/data/tiny.yaml"],

@@ -14,11 +14,14 @@ from luckyao.jobs.resources import (
     commands_memory_bytes,
     lucky_memory_bytes,
     lucky_minutes,
+    lucky_seconds,
     machine_memory_bytes,
     mem_mb,
     reconstructor_memory_bytes,
     simulate_memory_bytes,
     simulate_minutes,
+    simulate_seconds,
+    slopes_seconds,
     slopes_memory_bytes,
     turbulence_memory_bytes,
 )
@@ -250,17 +253,27 @@ def figure_report_labels(fig, data):
     }
 
 
+def chain_seconds(name):
+    """A case's estimated work after its screens [s on one core]: its LGS slopes product, its
+    simulation and its lucky job (jobs/resources.py)."""
+    slopes = slopes_seconds(CASES[name]) if VIEW.cases[name].slopes is not None else 0.0
+    return slopes + simulate_seconds(CASES[name]) + lucky_seconds(VIEW.cases[name].lucky_settings)
+
+
 def simulate_priority(case):
-    """Scheduling priority of a case's simulation, 0-9 (below the lucky rule's 10): the
-    cases whose post-processing is longest (detectors x targets: the detector sweep,
-    then the fields) are simulated first, so their long lucky jobs run beside the other
-    simulations instead of alone at the end of the study; an LGS twin (config.lgs_twin)
-    as early as the no-AO cases that wait for it."""
+    """Scheduling priority of a case's simulation, 0-9 (below the lucky rule's 10): the longest
+    chains of work first (:func:`chain_seconds`: the detector sweep's long lucky jobs, the
+    fields, the largest telescopes), so that they run beside the short cases instead of alone at
+    the end of the study; an LGS twin (config.lgs_twin) as early as the no-AO cases that wait
+    for it."""
+    longest = max(chain_seconds(name) for name in CASES)
+    own = max(chain_seconds(name) for name in CASES if name == case or LGS_TWIN[name] == case)
+    return min(9, int(10 * own / longest))
 
-    def work(name):
-        return len(VIEW.cases[name].detectors) * len(CASES[name]["targets_arcsec"])
 
-    return min(9, max(work(name) for name in CASES if name == case or LGS_TWIN[name] == case) // 2)
+def screens_priority(key):
+    """A screens job's scheduling priority: that of the most urgent simulation using them."""
+    return max(simulate_priority(name) for name, screens in TURBULENCE.items() if screens.key == key)
 
 
 def slopes_priority(key):

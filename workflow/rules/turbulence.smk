@@ -9,6 +9,7 @@ rule turbulence:
         "logs/turbulence/{key}.log",
     benchmark:
         "results/benchmarks/turbulence/{key}.tsv"
+    priority: lambda w: screens_priority(w.key)  # the longest chains of work first
     threads: 2  # two layers at once (independent draws: the same screens for any number)
     resources:
         mem_mb=lambda w: mem_mb(turbulence_memory_bytes(TURBULENCE_BY_KEY[w.key])),  # paper fidelity: 15800

@@ -126,12 +126,9 @@ def quality_vs_diameter_data(settings: FigureSettings, datasets) -> xr.Dataset:
 
 
 def _probability_bars(cell: xr.Dataset) -> list[np.ndarray]:
-    """The lucky-frame probability's error bars below and above: its Wilson interval, or in a
-    dataset drawn before it had one (the published 10 s run) the batch-means error both ways."""
+    """The lucky-frame probability's error bars below and above: its Wilson interval."""
     p = cell.lucky_probability.values
-    if "lucky_probability_low" in cell:
-        return [p - cell.lucky_probability_low.values, cell.lucky_probability_high.values - p]
-    return [cell.lucky_probability_error.values] * 2
+    return [p - cell.lucky_probability_low.values, cell.lucky_probability_high.values - p]
 
 
 def draw_quality_vs_diameter(ds: xr.Dataset, title: str):

@@ -19,13 +19,14 @@ Z_ONE_SIGMA = 1.0
 
 def wilson_interval(fraction, n, z: float = Z_ONE_SIGMA) -> tuple[np.ndarray, np.ndarray]:
     """Wilson's score interval (low, high) of a binomial proportion ``fraction`` observed in
-    ``n`` independent trials (arrays broadcast): centre ``(p + z^2/2n) / (1 + z^2/n)``,
+    ``n`` independent trials (arrays broadcast), holding ``fraction``: centre ``(p + z^2/2n) / (1 + z^2/n)``,
     half-width ``z sqrt(p (1 - p) / n + z^2 / 4n^2) / (1 + z^2/n)``."""
     p, n = np.asarray(fraction, dtype=float), np.asarray(n, dtype=float)
     shrink = 1.0 + z * z / n
     centre = (p + z * z / (2 * n)) / shrink
     half = z * np.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / shrink
-    return np.clip(centre - half, 0.0, 1.0), np.clip(centre + half, 0.0, 1.0)
+    # p lies inside in exact arithmetic; at p = 0 or 1 rounding may leave a bound 1e-20 beyond it
+    return np.minimum(np.clip(centre - half, 0.0, 1.0), p), np.maximum(np.clip(centre + half, 0.0, 1.0), p)
 
 
 def effective_sample_size(series: np.ndarray, n_blocks: int) -> float:
