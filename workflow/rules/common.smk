@@ -260,15 +260,18 @@ def chain_seconds(name):
     return slopes + simulate_seconds(CASES[name]) + lucky_seconds(VIEW.cases[name].lucky_settings)
 
 
+CHAIN_SECONDS = {name: chain_seconds(name) for name in CASES}
+"""Each case's :func:`chain_seconds`, estimated once when the workflow is read."""
+
+
 def simulate_priority(case):
     """Scheduling priority of a case's simulation, 0-9 (below the lucky rule's 10): the longest
-    chains of work first (:func:`chain_seconds`: the detector sweep's long lucky jobs, the
+    chains of work first (:data:`CHAIN_SECONDS`: the detector sweep's long lucky jobs, the
     fields, the largest telescopes), so that they run beside the short cases instead of alone at
     the end of the study; an LGS twin (config.lgs_twin) as early as the no-AO cases that wait
     for it."""
-    longest = max(chain_seconds(name) for name in CASES)
-    own = max(chain_seconds(name) for name in CASES if name == case or LGS_TWIN[name] == case)
-    return min(9, int(10 * own / longest))
+    own = max(CHAIN_SECONDS[name] for name in CASES if name == case or LGS_TWIN[name] == case)
+    return min(9, int(10 * own / max(CHAIN_SECONDS.values())))
 
 
 def screens_priority(key):
