@@ -196,6 +196,37 @@ def test_no_fourier_with_references():
         )
 
 
+def test_fourier_config_is_checked_before_any_job():
+    """Its cases known and without a reference target; a fourier figure's cases among them, its
+    fractions Fourier's; a case's lucky settings carry the fractions only when listed."""
+    from luckyao.studyspec.lucky import lucky_settings
+    from luckyao.studyspec.schema import ConfigError
+    from luckyao.studyspec.study import validate_study
+
+    from studies import tiny
+
+    study = tiny()
+    study["lucky"]["fourier"] = {"cases": ["good", "nope", "field"], "fractions": [0.1, 1.0]}
+    with pytest.raises(ConfigError) as refused:
+        validate_study(study)
+    assert "lucky.fourier.cases': unknown case 'nope'" in str(refused.value)
+    assert "case 'field' has a reference_target" in str(refused.value)
+    study["lucky"]["fourier"]["cases"] = ["good"]
+    study["figures"]["fourier"] = {
+        "kind": "fourier",
+        "cases": ["good", "bad"],
+        "criteria": ["strehl"],
+        "fractions": [0.1],
+    }
+    with pytest.raises(ConfigError, match="lucky.fourier.cases': case 'bad' is not one"):
+        validate_study(study)
+    study["figures"]["fourier"]["cases"] = ["good"]
+    cases = validate_study(study)
+    assert lucky_settings(study, cases, "good")["fourier_fractions"] == [0.1, 1.0]
+    assert "fourier_fractions" not in lucky_settings(study, cases, "bad")
+    assert lucky_settings(study, cases, "bad") == lucky_settings(tiny(), cases, "bad")
+
+
 @pytest.mark.workflow
 def test_a_case_with_fourier_lucky_imaging_keeps_every_other_number_and_draws_its_figure(tmp_path):
     """The tiny study's detector-sweep case (cog and xcorr, a noiseless, a faint and two sweep
@@ -228,8 +259,9 @@ def test_a_case_with_fourier_lucky_imaging_keeps_every_other_number_and_draws_it
         fractions=(0.1, 1.0),
         read_noise_e=(0.1,),
     )
-    data = FIGURE_KINDS["fourier"][0](settings, [ds.sel(registration="cog")])
-    assert data.fourier_strehl_noiseless.sizes == {"case": 1, "fraction": 2, "read_noise": 1, "signal": 3}
+    data = FIGURE_KINDS["fourier"][0](settings, [ds])
+    sizes = {"registration": 2, "case": 1, "fraction": 2, "read_noise": 1, "signal": 3}
+    assert data.fourier_strehl_noiseless.sizes == sizes
     assert np.isfinite(data.fourier_strehl_noiseless).all()
     fig = FIGURE_KINDS["fourier"][1](data, "tiny")
-    assert len([ax for ax in fig.axes if ax.get_visible()]) == 4
+    assert len(fig.axes) == 2 * 3  # a row per method: Strehl, d50, and 10 % against signal

@@ -72,7 +72,7 @@ FIGURE_KINDS = {
     "fourier": (fourier_data, draw_fourier),
 }
 
-REGISTRATION_KINDS = ("registration", "quality_vs_signal", "limiting_magnitude")
+REGISTRATION_KINDS = ("registration", "quality_vs_signal", "limiting_magnitude", "fourier")
 """The kinds drawn for every registration method; the others draw the baseline, ``cog``."""
 
 

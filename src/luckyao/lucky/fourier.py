@@ -5,11 +5,12 @@ scalar criterion and adds them whole. Fourier lucky imaging keeps, at each spati
 ``q`` of the registered frames, the ``n_f`` frames whose Fourier amplitude ``|X_j(q)|`` is the
 largest there, and averages their complex values: ``Y(q) = mean_{j in S_f(q)} X_j(q)``; the
 integrated image is the inverse transform of ``Y``. At ``f = 1`` every frequency keeps every frame
-and ``Y`` is the transform of the shift-and-add image (:func:`tests` equal to float64 rounding).
+and ``Y`` is the transform of the shift-and-add image (equal to float64 rounding,
+``tests/test_fourier.py``).
 
 What is transformed: each frame's registered central square of ``crop_px`` pixels (the integrated
 images' crop, ``shared_image_crop_px``), the same square the method's shift-and-add image keeps
-(:func:`registered_crops`), in float64 (``scipy.fft.rfft2``: the half plane ``crop_px x (crop_px/2 + 1)``).
+(:func:`registered_crops`), in float64 (FFTW's real transform: the half plane ``crop_px x (crop_px/2 + 1)``).
 The amplitudes ranked are float32 (ties, in frame order). On the half plane's self-conjugate columns
 (``q_x`` 0 and ``crop_px/2``) ``q`` and ``-q`` are both present: their amplitude is taken as the larger
 of the two, so both keep the same frames and ``Y`` is Hermitian: the image is real.
@@ -37,7 +38,10 @@ Memory per registration method and detector: the amplitudes kept, float32
 kept, 26 MB for 2,500), and the sums, complex128 ``2 x fractions x crop_px (crop_px/2 + 1)`` (100 kB).
 """
 
+from functools import lru_cache
+
 import numpy as np
+import pyfftw
 import scipy.fft
 import xarray as xr
 
@@ -63,8 +67,21 @@ def registered_crops(accumulation, frames: np.ndarray, shifts: np.ndarray, remai
 
 
 def spectra_of(crops: np.ndarray) -> np.ndarray:
-    """The real FFTs (k, c, c/2 + 1) complex128 of crops (k, c, c), in float64."""
-    return scipy.fft.rfft2(np.asarray(crops, dtype=np.float64))
+    """The real FFTs (k, c, c/2 + 1) complex128 of crops (k, c, c), in float64 (FFTW, :func:`_rfft2`)."""
+    frames, spectra, fft = _rfft2(*crops.shape[:2])
+    np.copyto(frames, crops)
+    fft.execute()
+    return spectra.copy()
+
+
+@lru_cache(maxsize=8)
+def _rfft2(k: int, c: int) -> tuple:
+    """Float64 frames (k, c, c), their spectra (k, c, c/2 + 1) and the FFTW plan between them
+    (FFTW_ESTIMATE: chosen without timing, so the same rounding in both passes and every process;
+    2.5x faster than ``scipy.fft`` at 64 pixels)."""
+    frames = pyfftw.empty_aligned((k, c, c), np.float64)
+    spectra = pyfftw.empty_aligned((k, c, c // 2 + 1), np.complex128)
+    return frames, spectra, pyfftw.FFTW(frames, spectra, axes=(1, 2), flags=("FFTW_ESTIMATE",), threads=1)
 
 
 def amplitudes(spectra: np.ndarray) -> np.ndarray:
@@ -159,9 +176,11 @@ class FourierSelection:
         for s, j in enumerate(np.flatnonzero(self.partial)):
             threshold, ties = self.threshold[i, s], self.ties[i, s]
             equal = amp == threshold
-            order = np.cumsum(equal, axis=0) + self.taken[i, j]
-            out[j] = (amp > threshold) | (equal & (order <= ties))
-            self.taken[i, j] += equal.sum(axis=0)
+            out[j] = amp > threshold
+            at = np.flatnonzero(equal.any(axis=0))  # the frequencies with frames at their threshold
+            tied = equal[:, at]
+            out[j][:, at] |= tied & (np.cumsum(tied, axis=0) + self.taken[i, j, at] <= ties[at])
+            self.taken[i, j, at] += tied.sum(axis=0)
         self.kept[i] += out.sum(axis=1)
         return out
 
