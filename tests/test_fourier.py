@@ -199,6 +199,7 @@ def test_no_fourier_with_references():
 def test_fourier_config_is_checked_before_any_job():
     """Its cases known and without a reference target; a fourier figure's cases among them, its
     fractions Fourier's; a case's lucky settings carry the fractions only when listed."""
+    from luckyao.jobs.resources import fourier_memory_bytes
     from luckyao.studyspec.lucky import lucky_settings
     from luckyao.studyspec.schema import ConfigError
     from luckyao.studyspec.study import validate_study
@@ -225,6 +226,10 @@ def test_fourier_config_is_checked_before_any_job():
     assert lucky_settings(study, cases, "good")["fourier_fractions"] == [0.1, 1.0]
     assert "fourier_fractions" not in lucky_settings(study, cases, "bad")
     assert lucky_settings(study, cases, "bad") == lucky_settings(tiny(), cases, "bad")
+    # the pre-flight's memory: 1.25 x (at least a chunk of 64) float32 amplitudes at each of the 64-pixel
+    # crop's 2,112 frequencies, per detector (2) and method (cog)
+    assert fourier_memory_bytes(lucky_settings(study, cases, "good")) == 1.25 * 64 * 2112 * 4 * 2
+    assert fourier_memory_bytes(lucky_settings(study, cases, "bad")) == 0
 
 
 @pytest.mark.workflow

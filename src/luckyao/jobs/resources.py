@@ -214,10 +214,11 @@ detectors and 25,000 frames)."""
 SUBPIXEL_FRAME_MS = 0.42
 """More per frame, detector and sub-pixel registration method (the sweep case's three: 10.05
 minutes of its 19.7 for 19 detectors)."""
-FOURIER_FRAME_MS = 0.45
-"""More per frame, detector and registration method with Fourier lucky imaging (both passes'
-crop transforms and selection, a noisy frame's second drawing; 0.32-0.44 ms measured with ``cog``
-and the noiseless detector, 0.33-0.5 with noisy detectors: docs/performance.md)."""
+FOURIER_FRAME_MS, FOURIER_REDRAW_MS = 0.25, 0.4
+"""More per frame with Fourier lucky imaging: per detector and registration method (both passes'
+crop transforms and selection: 0.03-0.30 ms measured with ``cog`` and the noiseless detector), and
+per noisy detector (its noise drawn again in pass 2: 1.4 ms for the noiseless and 2 noisy
+detectors with ``cog``; docs/performance.md)."""
 RUNTIME_MARGIN = 3.0
 """Wall time declared over the estimate: a loaded node, a slower core."""
 
@@ -264,15 +265,15 @@ def simulate_minutes(case: dict) -> int:
 def lucky_seconds(settings: dict) -> float:
     """A lucky job: every target's frames through its detectors and registration methods
     (:data:`LUCKY_FRAME_MS`, :data:`NOISY_FRAME_MS`, :data:`SUBPIXEL_FRAME_MS`,
-    :data:`FOURIER_FRAME_MS`, as the camera's pixels), and each target the simulation did not image
-    (all with ``replay_frames``) made again: its science path (:data:`IMAGING_SHARE` of a step)
-    once per pass over the frames, 3 with noisy detectors, else 2."""
+    :data:`FOURIER_FRAME_MS`, :data:`FOURIER_REDRAW_MS`, as the camera's pixels), and each target the
+    simulation did not image (all with ``replay_frames``) made again: its science path
+    (:data:`IMAGING_SHARE` of a step) once per pass over the frames, 3 with noisy detectors, else 2."""
     case, detectors = settings["case_config"], settings["detectors"]
     noisy = sum(d["photons_per_frame"] is not None for d in detectors.values())
     subpixel = sum(name != "cog" for name in registrations(settings))
     frame_ms = LUCKY_FRAME_MS + NOISY_FRAME_MS * noisy + SUBPIXEL_FRAME_MS * subpixel * len(detectors)
     if settings.get("fourier_fractions"):
-        frame_ms += FOURIER_FRAME_MS * len(detectors) * len(registrations(settings))
+        frame_ms += FOURIER_FRAME_MS * len(detectors) * len(registrations(settings)) + FOURIER_REDRAW_MS * noisy
     targets = len(case["targets_arcsec"])
     frames_s = frame_count(case) * targets * (case["camera"]["n_pixels"] / 256) ** 2 * frame_ms / 1e3
     replayed = targets if settings.get("replay_frames", False) else targets - len(imaged_targets(case))

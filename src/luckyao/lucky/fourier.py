@@ -99,7 +99,7 @@ def amplitudes(spectra: np.ndarray) -> np.ndarray:
 class TopAmplitudes:
     """The ``keep`` largest amplitudes at each of ``n_freq`` frequencies over the frames streamed
     through :meth:`add` (exact: a frequency's buffer is cut to its ``keep`` largest whenever it is full,
-    ``np.partition``; it holds ``keep`` + ``slack`` values, float32)."""
+    ``np.partition``; it holds ``keep + max(slack, keep / 4)`` values, float32)."""
 
     def __init__(self, keep: int, n_freq: int, slack: int):
         self.keep = keep
@@ -111,6 +111,8 @@ class TopAmplitudes:
         k = len(amp)
         if self.filled + k > self.values.shape[1]:
             self._cut()
+            if self.filled + k > self.values.shape[1]:
+                raise ValueError(f"a chunk of {k} frames, more than the first's")
         self.values[:, self.filled : self.filled + k] = amp.T
         self.filled += k
 
