@@ -270,3 +270,15 @@ def test_a_case_with_fourier_lucky_imaging_keeps_every_other_number_and_draws_it
     assert np.isfinite(data.fourier_strehl_noiseless).all()
     fig = FIGURE_KINDS["fourier"][1](data, "tiny")
     assert len(fig.axes) == 2 * 3  # a row per method: Strehl, d50, and 10 % against signal
+
+
+def test_a_bright_detectors_selection_scored_on_the_noiseless_frames_is_the_noiseless_detectors():
+    """1e10 photons per frame: the amplitudes' relative noise (~1e-5 at the frequencies that carry
+    the image) barely moves the selection, and the shifts are the noiseless ones, so the bright
+    detector's Fourier scores on the noiseless frames are the noiseless detector's (to 1e-3), while its
+    own are within its photon noise of them."""
+    ds = run([Detector("ideal"), Detector("bright", 1e10, 0.1)], [0.1, 1.0])[0]
+    ideal, bright = ds.sel(detector="ideal"), ds.sel(detector="bright")
+    for name in ("strehl", "d50_arcsec"):
+        np.testing.assert_allclose(bright[f"fourier_{name}_noiseless"], ideal[f"fourier_{name}"], rtol=1e-3)
+        np.testing.assert_allclose(bright[f"fourier_{name}"], ideal[f"fourier_{name}"], rtol=1e-3)
