@@ -25,9 +25,10 @@ are that case's first 256 instead (real AO-corrected frames).
 With ``--registrations NAME ...`` the frames are registered by those methods (``lucky.registration``;
 default all four, as the paper's sweep cases), in one run (``lucky.run_lucky_methods``: the methods
 share the passes over the frames, as the study runs them); ``--registrations cog`` times ``cog`` alone.
+With ``--fourier F ...``, Fourier lucky imaging too at those fractions (``lucky.fourier``).
 
 Run: .venv/bin/python benchmarks/bench_lucky.py [--frames 256] [--cube 25000] [--repeats 1] [--blocks 10]
-     [--frames-file FRAMES.nc] [--registrations cog windowed_cog peak xcorr]
+     [--frames-file FRAMES.nc] [--registrations cog windowed_cog peak xcorr] [--fourier 0.01 0.1 1]
 """
 
 from luckyao.threads import pin_one_thread  # no numpy: before it is imported
@@ -156,7 +157,7 @@ def registration(name: str) -> Registration:
     )
 
 
-def run(frames: np.ndarray, n_frames: int, n_blocks: int = 0, methods=("cog",)) -> float:
+def run(frames: np.ndarray, n_frames: int, n_blocks: int = 0, methods=("cog",), fourier=None) -> float:
     im = imager()
     SCORING.update(s=0.0, images=0)
     t0 = time.perf_counter()
@@ -172,6 +173,7 @@ def run(frames: np.ndarray, n_frames: int, n_blocks: int = 0, methods=("cog",)) 
         n_blocks=n_blocks,
         progress_interval_s=60,
         registrations=[registration(name) for name in methods],
+        fourier_fractions=fourier,
     )
     return time.perf_counter() - t0
 
@@ -189,6 +191,7 @@ def main() -> None:
         choices=REGISTRATIONS,
         help="registration methods, in one run (lucky.registration; default all four)",
     )
+    parser.add_argument("--fourier", nargs="+", type=float, default=None, help="Fourier lucky imaging's fractions")
     parser.add_argument(
         "--frames-file",
         default=None,
@@ -200,8 +203,8 @@ def main() -> None:
     half = args.frames // 4
     print(f"registrations {' '.join(args.registrations)}")
     for _ in range(args.repeats):
-        t_half = run(frames, half, args.blocks, args.registrations)
-        t_full = run(frames, args.frames, args.blocks, args.registrations)
+        t_half = run(frames, half, args.blocks, args.registrations, args.fourier)
+        t_full = run(frames, args.frames, args.blocks, args.registrations, args.fourier)
         print(
             f"scoring_s_{args.frames} {SCORING['s']:.2f} ({SCORING['images']} images, "
             f"{SCORING['s'] / max(SCORING['images'], 1) * 1e3:.2f} ms each)"
@@ -215,7 +218,7 @@ def main() -> None:
         print(f"detector_frames_per_s {n_det / per_frame:.1f}")
         print(f"extrapolated_s_{TARGET_FRAMES} {fixed + TARGET_FRAMES * per_frame:.0f}")
     if args.cube:
-        elapsed = run(frames, args.cube, args.blocks, args.registrations)
+        elapsed = run(frames, args.cube, args.blocks, args.registrations, args.fourier)
         print(f"cube_frames {args.cube}")
         print(f"cube_seconds {elapsed:.1f}")
         print(f"peak_rss_mb {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:.0f}")

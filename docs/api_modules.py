@@ -48,6 +48,7 @@ API_MODULES = {
         "luckyao.lucky.registration",
         "luckyao.lucky.scoring",
         "luckyao.lucky.pipeline",
+        "luckyao.lucky.fourier",
     ],
     "Study configuration": [
         "luckyao.studyspec.schema",

@@ -24,7 +24,7 @@ from pathlib import Path
 
 import xarray as xr
 
-from .studyspec.lucky import sweep_cases
+from .studyspec.lucky import fourier_cases, sweep_cases
 from .studyspec.schema import ConfigError
 from .studyspec.study import load_study as _load_study
 from .studyspec.study import validate_study
@@ -123,6 +123,8 @@ def run_case(study: dict, case, name: str = "explore", workdir=None) -> xr.Datas
     lucky = study["lucky"]
     if "detector_sweep" in lucky:
         lucky["detector_sweep"]["cases"] = [c for c in sweep_cases(lucky) if c == name]
+    if "fourier" in lucky:
+        lucky["fourier"]["cases"] = [c for c in fourier_cases(lucky) if c == name]
     study = {
         **{k: v for k, v in study.items() if k != "sweeps"},
         "cases": {name: study["cases"][name]},

@@ -13,7 +13,7 @@ quality_vs_distance, quality_vs_parameter and comparisons kinds; diameter: quali
 limiting_magnitude; signal:
 quality_vs_signal; wavefront: asterism, rms_truth, residuals; tables:
 long_exposure_check, long_exposure_table, long_exposure_markdown, value_with_error;
-gallery: psf_gallery.
+gallery: psf_gallery; fourier: fourier (Fourier lucky imaging against shift-and-add).
 """
 
 import base64
@@ -25,6 +25,7 @@ from pathlib import Path
 from ..io.datasets import open_dataset, provenance, require_finite_lucky, write_dataset
 from ..io.hashing import sha256
 from .diameter import draw_quality_vs_diameter, quality_vs_diameter_data
+from .fourier import draw_fourier, fourier_data
 from .gallery import draw_psf_gallery, psf_gallery_data
 from .limiting import draw_limiting_magnitude, limiting_magnitude_data
 from .quality import (
@@ -68,9 +69,10 @@ FIGURE_KINDS = {
     "comparisons": (comparisons_data, draw_comparisons),
     "residuals": (residuals_data, draw_residuals),
     "psf_gallery": (psf_gallery_data, draw_psf_gallery),
+    "fourier": (fourier_data, draw_fourier),
 }
 
-REGISTRATION_KINDS = ("registration", "quality_vs_signal", "limiting_magnitude")
+REGISTRATION_KINDS = ("registration", "quality_vs_signal", "limiting_magnitude", "fourier")
 """The kinds drawn for every registration method; the others draw the baseline, ``cog``."""
 
 

@@ -160,12 +160,27 @@ def lucky_memory_bytes(settings: dict) -> float:
     :data:`SUBPIXEL_SUMS_FRACTION` of that for a sub-pixel method, for the 9 fractions of
     ``lucky.fractions`` they were measured with (the sums hold one image per fraction); replaying
     the frames (``replay_frames``), the simulation's memory besides (its block of frames, the DM
-    commands)."""
+    commands); Fourier lucky imaging's amplitudes (:func:`fourier_memory_bytes`)."""
     case = settings["case_config"]
     pixels = (case["camera"]["n_pixels"] / 256) ** 2 * len(settings["fractions"]) / MEASURED_FRACTIONS
     methods = sum(1.0 if name == "cog" else SUBPIXEL_SUMS_FRACTION for name in registrations(settings))
     replay = simulate_memory_bytes(case) if settings.get("replay_frames", False) else 0.0
-    return 1.5e9 + 0.21e9 * pixels * len(settings["detectors"]) * methods + replay
+    return 1.5e9 + 0.21e9 * pixels * len(settings["detectors"]) * methods + replay + fourier_memory_bytes(settings)
+
+
+def fourier_memory_bytes(settings: dict) -> float:
+    """Fourier lucky imaging's amplitudes (``fourier_fractions``, :mod:`luckyao.lucky.fourier`): per
+    detector and registration method, 1.25 x the largest count kept below all frames, float32, at each
+    frequency of the crop's half plane (``image_crop_px``, 64: 2,112); 0 without it."""
+    fractions = settings.get("fourier_fractions")
+    if not fractions:
+        return 0.0
+    n_frames = frame_count(settings["case_config"])
+    keep = max([round(f * n_frames) for f in fractions if round(f * n_frames) < n_frames] or [0])
+    n_pixels = settings["case_config"]["camera"]["n_pixels"]
+    crop = min(settings.get("image_crop_px", 64) or n_pixels, n_pixels)
+    per_set = 1.25 * max(keep, 64) * crop * (crop // 2 + 1) * 4.0
+    return per_set * len(settings["detectors"]) * len(registrations(settings))
 
 
 # Time estimates [s] of one job's work on one core of the measuring machine (docs/performance.md;
@@ -199,6 +214,11 @@ detectors and 25,000 frames)."""
 SUBPIXEL_FRAME_MS = 0.42
 """More per frame, detector and sub-pixel registration method (the sweep case's three: 10.05
 minutes of its 19.7 for 19 detectors)."""
+FOURIER_FRAME_MS, FOURIER_REDRAW_MS = 0.25, 0.4
+"""More per frame with Fourier lucky imaging: per detector and registration method (both passes'
+crop transforms and selection: 0.03-0.30 ms measured with ``cog`` and the noiseless detector), and
+per noisy detector (its noise drawn again in pass 2: 1.4 ms for the noiseless and 2 noisy
+detectors with ``cog``; docs/performance.md)."""
 RUNTIME_MARGIN = 3.0
 """Wall time declared over the estimate: a loaded node, a slower core."""
 
@@ -244,14 +264,16 @@ def simulate_minutes(case: dict) -> int:
 
 def lucky_seconds(settings: dict) -> float:
     """A lucky job: every target's frames through its detectors and registration methods
-    (:data:`LUCKY_FRAME_MS`, :data:`NOISY_FRAME_MS`, :data:`SUBPIXEL_FRAME_MS`, as the camera's
-    pixels), and each target the simulation did not image (all with ``replay_frames``) made
-    again: its science path (:data:`IMAGING_SHARE` of a step) once per pass over the frames, 3
-    with noisy detectors, else 2."""
+    (:data:`LUCKY_FRAME_MS`, :data:`NOISY_FRAME_MS`, :data:`SUBPIXEL_FRAME_MS`,
+    :data:`FOURIER_FRAME_MS`, :data:`FOURIER_REDRAW_MS`, as the camera's pixels), and each target the
+    simulation did not image (all with ``replay_frames``) made again: its science path
+    (:data:`IMAGING_SHARE` of a step) once per pass over the frames, 3 with noisy detectors, else 2."""
     case, detectors = settings["case_config"], settings["detectors"]
     noisy = sum(d["photons_per_frame"] is not None for d in detectors.values())
     subpixel = sum(name != "cog" for name in registrations(settings))
     frame_ms = LUCKY_FRAME_MS + NOISY_FRAME_MS * noisy + SUBPIXEL_FRAME_MS * subpixel * len(detectors)
+    if settings.get("fourier_fractions"):
+        frame_ms += FOURIER_FRAME_MS * len(detectors) * len(registrations(settings)) + FOURIER_REDRAW_MS * noisy
     targets = len(case["targets_arcsec"])
     frames_s = frame_count(case) * targets * (case["camera"]["n_pixels"] / 256) ** 2 * frame_ms / 1e3
     replayed = targets if settings.get("replay_frames", False) else targets - len(imaged_targets(case))

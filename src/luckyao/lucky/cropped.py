@@ -101,13 +101,7 @@ class CroppedFrames:
         if not which.any():
             return out
         picked = slice(None) if which.all() else np.flatnonzero(which)  # a slice: no copies
-        crops = np.empty((k, c, c), np.float32)
-        image_helpers.crop_rolled(frames, shifts, which, crops)
-        moving = which & np.any(remainder != 0, axis=1)
-        if moving.all():
-            crops = fourier_shift(crops, remainder)
-        elif moving.any():
-            crops[moving] = fourier_shift(crops[moving], remainder[moving])
+        crops = self.registered_crops(frames, shifts, remainder, which)
         out[picked, : c * c] = crops[picked].reshape(-1, c * c)
         radial = slice(c * c, c * c + self.encircled.n_bins)
         known = np.zeros(k, bool) if radial_sums is None else which & np.isfinite(radial_sums).all(axis=1)
@@ -122,6 +116,21 @@ class CroppedFrames:
                 out[missing, radial] = self.encircled.radial_sums_about(frames, centres, spectra, missing)[:, 0]
         out[picked, -1] = flux[picked]
         return out
+
+    def registered_crops(
+        self, frames: np.ndarray, shifts: np.ndarray, remainder: np.ndarray, which: np.ndarray
+    ) -> np.ndarray:
+        """The registered crops (k, c, c) float32 of frames (k, n, n) (module docstring), those of
+        ``which`` (k,) bool only (the others undefined)."""
+        c = self.crop_px
+        crops = np.empty((len(frames), c, c), np.float32)
+        image_helpers.crop_rolled(frames, shifts, which, crops)
+        moving = which & np.any(remainder != 0, axis=1)
+        if moving.all():
+            crops = fourier_shift(crops, remainder)
+        elif moving.any():
+            crops[moving] = fourier_shift(crops[moving], remainder[moving])
+        return crops
 
     @staticmethod
     def add(prepared: np.ndarray, shifts: np.ndarray, rows: np.ndarray, partial: np.ndarray, sign: float) -> None:

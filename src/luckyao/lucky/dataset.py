@@ -39,8 +39,9 @@ def noise_flag_attrs(metric: str) -> dict:
 
 def add_noise_flags(ds: xr.Dataset) -> None:
     """``<metric>_noise_dominated`` (int8, :func:`noise_dominated`) beside each of
-    :data:`NOISE_METRICS` that has its noiseless counterpart ``<metric>_noiseless``."""
-    for metric in NOISE_METRICS:
+    :data:`NOISE_METRICS` (and its Fourier lucky imaging's ``fourier_<metric>``) that has its
+    noiseless counterpart ``<metric>_noiseless``."""
+    for metric in [*NOISE_METRICS, *(f"fourier_{metric}" for metric in NOISE_METRICS)]:
         if f"{metric}_noiseless" in ds:
             flags = noise_dominated(ds[metric], ds[f"{metric}_noiseless"]).astype(np.int8)
             ds[f"{metric}_noise_dominated"] = flags.transpose(*ds[metric].dims).assign_attrs(noise_flag_attrs(metric))

@@ -27,6 +27,7 @@ from .dataset import (
     result_dataset,
 )
 from .detector import Detector
+from .fourier import FourierSelection, add_fourier, registered_crops
 from .guesses import GuessedBins
 from .metrics import d50_from_radius, score_images
 from .ranking import criterion_bins
@@ -110,6 +111,7 @@ class MethodRun:
         self.clean = self.guessed = self.accumulation = self.buffer = None
         self.pending_noiseless = []  # (noisy detector, its rows (k, m)) of the chunk's noiseless frames, to add
         self.drawn_again = np.zeros(n_det, dtype=np.int64)
+        self.fourier = None  # the Fourier lucky imaging (:mod:`.fourier`), if the run asks for it
 
     def assign(self, crits) -> None:
         """Run and block bins of criteria ``crits`` from their values."""
@@ -172,6 +174,28 @@ class MethodRun:
         self.frames.allocate(n_pixels, self.accumulation.window.size)
         if self.registration.subpixel:
             self.buffer = np.empty((2, chunk_frames, *self.accumulation.item_shape))
+        if run.fourier_fractions is not None:
+            size = min(run.fourier_crop_px(n_pixels), getattr(self.accumulation, "crop_px", n_pixels))
+            self.fourier = FourierSelection(len(run.detectors), run.n_frames, run.fourier_fractions, size, chunk_frames)
+
+    def _crops(self, frames: np.ndarray, i: int, sl: slice) -> np.ndarray:
+        """Detector ``i``'s frames ``sl`` (k, n, n) registered, their central crop of the Fourier lucky imaging."""
+        shifts, remainder = self.frames.shifts[i, sl], self.frames.remainder[i, sl]
+        return registered_crops(self.accumulation, frames, shifts, remainder, self.fourier.crop_px)
+
+    def add_fourier(self, i: int, sl: slice, detected, unit: FrameSpectra, detected_rows=None) -> None:
+        """Pass 2, the Fourier lucky imaging's sums (:meth:`.fourier.FourierSelection.add`) of detector
+        ``i``'s frames ``sl``: ``detected`` (its frames drawn again, all of them, and their row sums
+        ``detected_rows``) with the noiseless ``unit`` frames, or None for a noiseless detector (``unit``)."""
+        if self.fourier is None:
+            return
+        flux = self.frames.flux[i, sl]
+        if detected is None:
+            self.fourier.add(i, self._crops(unit.frames, i, sl), flux)
+            return
+        if not np.array_equal(detected_rows.sum(axis=1), flux):
+            raise RuntimeError(f"frames {sl.start}.. differ between the two passes")
+        self.fourier.add(i, self._crops(detected.frames, i, sl), flux, self._crops(unit.frames, i, sl), unit.flux())
 
     def _prepared(
         self, spectra: FrameSpectra, i: int, sl: slice, flux: np.ndarray, energies=None, which=None, slot: int = 0
@@ -200,6 +224,8 @@ class MethodRun:
         sums, early, late, guessed, frames = self.sums, self.early, self.late, self.guessed, self.frames
         k = sl.stop - sl.start
         frames.record(i, sl, measures)
+        if self.fourier is not None:
+            self.fourier.observe(i, self._crops(detected.frames, i, sl))
         shifts, add = frames.shifts[i, sl], self.accumulation.add
         radial_sums = measures[5] if len(measures) > 5 else None
         prepared = self._prepared(detected, i, sl, frames.flux[i, sl], radial_sums)
@@ -373,6 +399,9 @@ class MethodRun:
         if image_crop_px != 0:
             flux = None if isinstance(accumulation, WholeFrames) else accumulation.flux(integrated)
             ds = add_images(ds, accumulation.images(integrated), long_images, image_crop_px, flux, long_flux)
+        if self.fourier is not None:
+            ds = add_fourier(ds, self.fourier, run.detectors, run.peak, run.scale, image_crop_px != 0)
+            self.fourier = None
         ds.attrs.update(
             pixel_scale_arcsec=run.scale,
             diffraction_limited_peak=run.peak,

@@ -44,6 +44,11 @@ The passes over the frames, in order (:class:`_LuckyRun`):
    again is the result's ``frames_drawn_again`` attribute.
 3. Score: each fraction's image is the cumulative sum of its bins.
 
+With Fourier lucky imaging (``fourier_fractions``, :mod:`.fourier`), pass 1 also streams each
+registered frame's crop amplitudes per detector and method, pass 2 draws every noisy frame again
+(not only those guessed wrong) and adds each frame's complex values where the threshold keeps them;
+the other sums receive the same operations as without it.
+
 Alongside, the noiseless frames (the input, as float32) get the same detector's shifts
 and the same bins into a second set of partial sums: the ``*_noiseless`` scores separate a
 wrong selection or recentring from the noise in the final image. The sums are float64
@@ -77,7 +82,7 @@ import xarray as xr
 
 from ..progress import Progress, log
 from ..seeds import detector_key
-from . import adds
+from . import adds, cropped
 from .detector import Detector, KeyedNoise
 from .method_run import MethodRun
 from .metrics import EncircledEnergy, centroid_from_sums, strehl_from
@@ -122,6 +127,7 @@ def run_lucky(
     registration: Registration = COG,
     matched_strehl: MatchedStrehl | None = None,
     crop_px: int | None = None,
+    fourier_fractions: Sequence[float] | None = None,
 ) -> xr.Dataset:
     """Lucky imaging of one frame cube for several detectors, criteria and fractions (module docstring).
 
@@ -143,6 +149,7 @@ def run_lucky(
     is about its registered position. With ``matched_strehl`` (:class:`.scoring.MatchedStrehl`),
     a frame's Strehl (its criterion) is that of its matched-filtered peak, not of its brightest pixel.
     ``crop_px``: a sub-pixel method's crop (:mod:`.cropped`; default :func:`.cropped.crop_px`, 1.25").
+    ``fourier_fractions``: Fourier lucky imaging too (:func:`run_lucky_methods`).
 
     Returns a CF-style :class:`xarray.Dataset`: ``strehl``, ``fwhm_arcsec``,
     ``d50_arcsec`` (criterion, fraction, detector) and the same of the noiseless frames
@@ -175,6 +182,7 @@ def run_lucky(
         [registration],
         matched_strehl,
         crop_px,
+        fourier_fractions,
     )[0]
 
 
@@ -194,12 +202,17 @@ def run_lucky_methods(
     registrations: Sequence[Registration] = (COG,),
     matched_strehl: MatchedStrehl | None = None,
     crop_px: int | None = None,
+    fourier_fractions: Sequence[float] | None = None,
 ) -> list[xr.Dataset]:
     """:func:`run_lucky` of every registration method of ``registrations`` (distinct) in the same
     passes over the frames: each chunk is read and each detector's noise drawn once for all of
     them. ``references``: None, or one :class:`ImageReference` per method (that method's, e.g. the
     star's result of the same method). Returns one dataset per method, in order, each bit for bit
-    that of :func:`run_lucky` with that method (and reference) alone."""
+    that of :func:`run_lucky` with that method (and reference) alone. ``fourier_fractions``: each
+    method's Fourier lucky imaging too (:mod:`.fourier`) at these fractions, on its registered
+    frames' central ``image_crop_px`` square (0: :func:`.cropped.crop_px`'s), into each dataset's
+    ``fourier_*`` variables (:func:`.fourier.add_fourier`); the other variables are unchanged bit for
+    bit. Not with ``references``."""
     run = _LuckyRun(
         iter_chunks,
         n_frames,
@@ -215,6 +228,8 @@ def run_lucky_methods(
         list(registrations),
         matched_strehl,
         crop_px,
+        fourier_fractions,
+        image_crop_px,
     )
     run.measure_noiseless()
     run.detect_and_add()
@@ -275,6 +290,8 @@ class _LuckyRun:
         registrations: list[Registration],
         matched_strehl: MatchedStrehl | None,
         crop_px: int | None,
+        fourier_fractions=None,
+        image_crop_px: int | None = 64,
     ):
         self.iter_chunks, self.n_frames, self.detectors, self.fractions = iter_chunks, n_frames, detectors, fractions
         self.peak, self.scale, self.seed, self.n_blocks = diffraction_limited_peak, pixel_scale_arcsec, seed, n_blocks
@@ -283,7 +300,10 @@ class _LuckyRun:
         self.criteria = list(IMAGE_CRITERIA) + [(c.name, bool(c.larger_is_better)) for c in criteria_external]
         self.larger = [larger for _, larger in self.criteria]
         _check(n_frames, detectors, criteria_external, registrations, references)
+        if fourier_fractions is not None and references is not None:
+            raise ValueError("Fourier lucky imaging needs the frames' own image criteria: not with references")
         self.matched_strehl, self.crop_px = matched_strehl, crop_px
+        self.fourier_fractions, self.image_crop_px = fourier_fractions, image_crop_px
         self.methods = [
             MethodRun(self, registration, None if references is None else reference)
             for registration, reference in zip(registrations, references or registrations)
@@ -293,6 +313,13 @@ class _LuckyRun:
         self.long_none = self.encircled = self.clean = None
         # the spectra of a detector's frames and of the noiseless ones, each made once per chunk and shared
         self.detected, self.unit = FrameSpectra(), FrameSpectra()
+
+    def fourier_crop_px(self, n_pixels: int) -> int:
+        """Pixels across the Fourier lucky imaging's crop: the integrated images' (None: the whole
+        frame; 0: :func:`.cropped.crop_px`'s)."""
+        if self.image_crop_px is None:
+            return n_pixels
+        return min(n_pixels, self.image_crop_px or cropped.crop_px(n_pixels, self.scale))
 
     def _chunks(self, name: str) -> Iterator[tuple[slice, np.ndarray]]:
         """The frames' chunks ``(frames' slice, frames)``, the work arrays made at the first, with progress."""
@@ -391,21 +418,27 @@ class _LuckyRun:
             return
         for method in self.methods:
             method.rank_late()
+            if method.fourier is not None:
+                method.fourier.rank()
         for sl, unit in self._chunks("pass 2/2: frames"):
             chunk, spectra_unit = self.noise.prepare(unit), self.unit.reset(unit)
             for i, detector in enumerate(self.detectors):
                 if detector.noiseless:
                     for method in self.methods:
                         method.add_noiseless_detector(i, sl, spectra_unit)
+                        method.add_fourier(i, sl, None, spectra_unit)
                     continue
                 wrong = [method.guessed_wrong(i, sl) for method in self.methods]
                 drawn = np.logical_or.reduce([w[2] for w in wrong])
+                if self.fourier_fractions is not None:
+                    drawn[:] = True  # the Fourier sums take every frame
                 if not drawn.any():
                     continue
                 detected, rows, _, _ = chunk.detect(detector, self.seed, sl.start, self.noise.buffer, drawn)
                 spectra = self.detected.reset(detected)  # only the frames drawn are transformed
                 for method, w in zip(self.methods, wrong):
                     method.move(i, sl, spectra, rows, spectra_unit, w)
+                    method.add_fourier(i, sl, spectra, spectra_unit, rows)
             for method in self.methods:
                 method.score_blocks(sl, method.late)
         if self.guessing:

@@ -114,6 +114,7 @@ def lucky_case(
             image_crop_px=settings.image_crop_px,
             registrations=registrations,
             matched_strehl=matched_strehl,
+            fourier_fractions=settings.fourier_fractions,
         )
         if replay is not None:
             axis_strehl[target] = replay.axis_strehl[0]

@@ -36,6 +36,21 @@ def registrations(lucky: dict) -> list[str]:
     return list(_lucky_value(lucky, "registration"))
 
 
+def fourier_cases(lucky: dict) -> list[str]:
+    """The cases given Fourier lucky imaging: ``lucky.fourier.cases``, by default none."""
+    return list(_fourier_value(lucky, "cases"))
+
+
+def fourier_fractions(lucky: dict) -> list[float]:
+    """The fractions of Fourier lucky imaging: ``lucky.fourier.fractions``, by default the schema's."""
+    return [float(f) for f in _fourier_value(lucky, "fractions")]
+
+
+def _fourier_value(lucky: dict, key: str):
+    defaults = load_schema()["properties"]["lucky"]["properties"]["fourier"]["properties"]
+    return lucky.get("fourier", {}).get(key, defaults[key]["default"])
+
+
 MAX_SWEEP_DETECTORS = 1000
 """Most detectors of a detector sweep (read noises x levels; the paper's: 18)."""
 
@@ -95,13 +110,18 @@ def lucky_settings(study: dict, cases: dict, case_name: str) -> dict:
     is one of ``lucky.detector_sweep.cases`` (:func:`sweep_cases`: their cost goes only where
     the config asks; elsewhere ``cog`` alone), whatever figures the study draws; with
     ``replay_frames``, the flag that every target's frames are made again from the screens (no
-    cube)."""
-    lucky = {key: value for key, value in study["lucky"].items() if key not in ("detector_sweep", "registration")}
+    cube); with Fourier lucky imaging (:func:`fourier_cases`), its fractions ``fourier_fractions`` (only
+    then: the other cases' settings, and their hash, unchanged)."""
+    lucky = {
+        key: value for key, value in study["lucky"].items() if key not in ("detector_sweep", "registration", "fourier")
+    }
     lucky["error_blocks"] = error_blocks(study["lucky"])
     lucky["registration"] = ["cog"]
     if case_name in sweep_cases(study["lucky"]):
         lucky["detectors"] = {**lucky["detectors"], **sweep_detectors(study["lucky"])}
         lucky["registration"] = registrations(study["lucky"])
+    if case_name in fourier_cases(study["lucky"]):
+        lucky["fourier_fractions"] = fourier_fractions(study["lucky"])
     if study.get("replay_frames", False):  # only when set: the settings (and their hash) of a stored cube unchanged
         lucky["replay_frames"] = True
     return {"seed": study["seed"], "case": case_name, "case_config": cases[case_name], **lucky}

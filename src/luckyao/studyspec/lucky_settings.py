@@ -54,6 +54,8 @@ class LuckySettings:
     """A frame's Strehl: ``peak_pixel`` or ``matched_filter`` (:class:`luckyao.lucky.scoring.MatchedStrehl`)."""
     settings_json: str
     """The settings but the case config, as canonical JSON (stored with the results)."""
+    fourier_fractions: tuple[float, ...] | None = None
+    """The fractions of Fourier lucky imaging (:mod:`luckyao.lucky.fourier`), or None: not for this case."""
 
     @classmethod
     def from_settings(cls, settings: dict) -> "LuckySettings":
@@ -83,6 +85,7 @@ class LuckySettings:
             registrations=tuple(registrations(settings)),
             frame_strehl=frame_strehl(settings),
             settings_json=canonical_json({k: v for k, v in settings.items() if k != "case_config"}),
+            fourier_fractions=tuple(settings["fourier_fractions"]) if "fourier_fractions" in settings else None,
         )
 
     def registration_methods(self) -> list[Registration]:

@@ -6,7 +6,15 @@ the first problem of each case and figure is reported as a ``ConfigError`` namin
 """
 
 from ..clock import frame_count
-from .lucky import MAX_SWEEP_DETECTORS, SIGNAL_KINDS, error_blocks, sweep_cases, sweep_detector_list
+from .lucky import (
+    MAX_SWEEP_DETECTORS,
+    SIGNAL_KINDS,
+    error_blocks,
+    fourier_cases,
+    fourier_fractions,
+    sweep_cases,
+    sweep_detector_list,
+)
 from .resolved import criteria_of
 from .scaling import PRIOR_KEY, derived_case
 from .schema import ConfigError, check_finite, deep_merge, load_schema, validate_keys
@@ -117,6 +125,7 @@ def validate_study(config: dict, schema: dict | None = None) -> dict:
             continue
         cases[name] = resolved
     problems += _replay_problems(config, cases)
+    problems += _fourier_problems(config, cases)
     for fig_id, figure in config["figures"].items():
         try:
             _check_figure(fig_id, figure, cases, config)
@@ -125,6 +134,38 @@ def validate_study(config: dict, schema: dict | None = None) -> dict:
     if problems:
         raise ConfigError("\n".join(problems))
     return cases
+
+
+def _fourier_problems(config: dict, cases: dict) -> list[str]:
+    """Fourier lucky imaging's cases: known, and without a reference target (not built for them)."""
+    key = "config key 'lucky.fourier.cases'"
+    return [
+        f"{key}: unknown case '{name}'"
+        if name not in config["cases"]
+        else f"{key}: case '{name}' has a reference_target (Fourier lucky imaging selects on the frames themselves)"
+        for name in fourier_cases(config["lucky"])
+        if name not in config["cases"] or (name in cases and cases[name].get("reference_target") is not None)
+    ]
+
+
+def _check_fourier_figure(fig_id: str, figure: dict, config: dict) -> None:
+    """A fourier figure's cases given Fourier lucky imaging at its fractions, its read noises the sweep's."""
+    lucky = config["lucky"]
+    for case in figure["cases"]:
+        if case not in fourier_cases(lucky):
+            raise ConfigError(
+                f"config key 'lucky.fourier.cases': case '{case}' is not one, but the fourier figure '{fig_id}' "
+                "draws its Fourier lucky imaging: add it there (or take it off the figure)"
+            )
+    missing = set(figure["fractions"]) - set(fourier_fractions(lucky))
+    if missing:
+        raise ConfigError(f"config key 'figures.{fig_id}.fractions': {sorted(missing)} not in lucky.fourier.fractions")
+    sweep = lucky.get("detector_sweep")
+    missing = set(figure.get("read_noise_e", ())) - set(sweep["read_noise_e"] if sweep else ())
+    if missing:
+        raise ConfigError(
+            f"config key 'figures.{fig_id}.read_noise_e': {sorted(missing)} not in lucky.detector_sweep.read_noise_e"
+        )
 
 
 def _replay_problems(config: dict, cases: dict) -> list[str]:
@@ -207,6 +248,7 @@ def _check_figure(fig_id: str, figure: dict, cases: dict, config: dict) -> None:
         "psf_gallery": ("criteria", "fractions"),
         "quality_vs_diameter": ("criteria", "fractions"),
         "limiting_magnitude": ("criteria", "fractions"),
+        "fourier": ("criteria", "fractions"),
     }
     for key in needs.get(figure["kind"], ()):
         if key not in figure:
@@ -216,6 +258,8 @@ def _check_figure(fig_id: str, figure: dict, cases: dict, config: dict) -> None:
             f"config key 'figures.{fig_id}.parameter': '{figure['parameter']}' is not a parameter "
             f"of sweep '{figure['sweep']}'"
         )
+    if figure["kind"] == "fourier":
+        _check_fourier_figure(fig_id, figure, config)
     if figure["kind"] == "comparisons":
         if "pairs" not in figure:
             raise ConfigError(f"config key 'figures.{fig_id}.pairs': required for comparisons")
