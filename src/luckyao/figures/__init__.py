@@ -10,7 +10,7 @@ one colour-blind-safe palette (``style``).
 Public objects, by module --
 settings: FigureSettings, CaseSummary; quality: the quality_vs_fraction,
 quality_vs_distance, quality_vs_parameter and comparisons kinds; diameter: quality_vs_diameter; limiting:
-limiting_magnitude; signal:
+limiting_magnitude; more_stars: more_stars; signal:
 quality_vs_signal; wavefront: asterism, rms_truth, residuals; tables:
 long_exposure_check, long_exposure_table, long_exposure_markdown, value_with_error;
 gallery: psf_gallery.
@@ -27,6 +27,7 @@ from ..io.hashing import sha256
 from .diameter import draw_quality_vs_diameter, quality_vs_diameter_data
 from .gallery import draw_psf_gallery, psf_gallery_data
 from .limiting import draw_limiting_magnitude, limiting_magnitude_data
+from .more_stars import draw_more_stars, more_stars_data
 from .quality import (
     comparisons_data,
     draw_comparisons,
@@ -68,9 +69,10 @@ FIGURE_KINDS = {
     "comparisons": (comparisons_data, draw_comparisons),
     "residuals": (residuals_data, draw_residuals),
     "psf_gallery": (psf_gallery_data, draw_psf_gallery),
+    "more_stars": (more_stars_data, draw_more_stars),
 }
 
-REGISTRATION_KINDS = ("registration", "quality_vs_signal", "limiting_magnitude")
+REGISTRATION_KINDS = ("registration", "quality_vs_signal", "limiting_magnitude", "more_stars")
 """The kinds drawn for every registration method; the others draw the baseline, ``cog``."""
 
 
