@@ -11,6 +11,7 @@ against the differential tilt measured between the stars' and the target's noise
 gravity (``star_differential_tilt_variance_px2``).
 """
 
+import logging
 from collections.abc import Callable
 from dataclasses import replace
 
@@ -24,6 +25,8 @@ from ..lucky.registration import COG
 from ..lucky.stars import combined_positions, noise_variance_px2, star_positions, star_weights
 from ..seeds import target_seed
 from ..studyspec.lucky_settings import LuckySettings
+
+log = logging.getLogger(__name__)
 
 STARS_VARIABLES = ("strehl", "d50_arcsec", "fwhm_arcsec")
 """The science target's scores kept per count of stars, with their ``_noiseless`` and ``_error``."""
@@ -51,14 +54,13 @@ def stars_dataset(
     detectors = list(settings.detectors)
     noiseless = next(i for i, d in enumerate(detectors) if d.noiseless)
     cog = settings.registrations.index("cog")
-    positions = np.stack(
-        [
-            star_positions(
-                frames_of(star), n_frames, _scaled(detectors, ratio), target_seed(settings.seed, star), registrations
-            )
-            for star, ratio in zip(stars, ratios)
-        ]
-    )  # (star, method, detector, frame, 2)
+    positions = []
+    for star, ratio in zip(stars, ratios):
+        log.info("stars: the positions of star %d (target %d, flux ratio %g)", len(positions) + 1, star, ratio)
+        scaled = _scaled(detectors, ratio)
+        seed = target_seed(settings.seed, star)
+        positions.append(star_positions(frames_of(star), n_frames, scaled, seed, registrations))
+    positions = np.stack(positions)  # (star, method, detector, frame, 2)
     truth = star_positions(frames_of(science), n_frames, [Detector("noiseless")], 0, [COG])[0, 0]  # (frame, 2)
     measured = np.nanvar(positions[:, cog, noiseless] - truth, axis=1)  # (star, 2) y, x
     targets = np.asarray(settings.case_config["targets_arcsec"], dtype=float)
@@ -89,6 +91,7 @@ def stars_dataset(
             ImageReference(ds.frame_strehl.values, ds.frame_d50_arcsec.values, combined[m])
             for m, ds in enumerate(reference)
         ]
+        log.info("stars: the science target (target %d) registered on %d stars", science, n)
         results.append(run_lucky_methods(frames_of(science), n_frames, references=references, **lucky_kwargs))
     return _dataset(spec, results, separation, measured, theory, noise)
 
