@@ -10,7 +10,7 @@ one colour-blind-safe palette (``style``).
 Public objects, by module --
 settings: FigureSettings, CaseSummary; quality: the quality_vs_fraction,
 quality_vs_distance, quality_vs_parameter and comparisons kinds; diameter: quality_vs_diameter; limiting:
-limiting_magnitude; signal:
+limiting_magnitude; more_stars: more_stars; signal:
 quality_vs_signal; wavefront: asterism, rms_truth, residuals; tables:
 long_exposure_check, long_exposure_table, long_exposure_markdown, value_with_error;
 gallery: psf_gallery; fourier: fourier (Fourier lucky imaging against shift-and-add).
@@ -28,6 +28,7 @@ from .diameter import draw_quality_vs_diameter, quality_vs_diameter_data
 from .fourier import draw_fourier, fourier_data
 from .gallery import draw_psf_gallery, psf_gallery_data
 from .limiting import draw_limiting_magnitude, limiting_magnitude_data
+from .more_stars import draw_more_stars, more_stars_data
 from .quality import (
     comparisons_data,
     draw_comparisons,
@@ -70,9 +71,10 @@ FIGURE_KINDS = {
     "residuals": (residuals_data, draw_residuals),
     "psf_gallery": (psf_gallery_data, draw_psf_gallery),
     "fourier": (fourier_data, draw_fourier),
+    "more_stars": (more_stars_data, draw_more_stars),
 }
 
-REGISTRATION_KINDS = ("registration", "quality_vs_signal", "limiting_magnitude", "fourier")
+REGISTRATION_KINDS = ("registration", "quality_vs_signal", "limiting_magnitude", "fourier", "more_stars")
 """The kinds drawn for every registration method; the others draw the baseline, ``cog``."""
 
 

@@ -267,14 +267,19 @@ def lucky_seconds(settings: dict) -> float:
     (:data:`LUCKY_FRAME_MS`, :data:`NOISY_FRAME_MS`, :data:`SUBPIXEL_FRAME_MS`,
     :data:`FOURIER_FRAME_MS`, :data:`FOURIER_REDRAW_MS`, as the camera's pixels), and each target the
     simulation did not image (all with ``replay_frames``) made again: its science path
-    (:data:`IMAGING_SHARE` of a step) once per pass over the frames, 3 with noisy detectors, else 2."""
+    (:data:`IMAGING_SHARE` of a step) once per pass over the frames, 3 with noisy detectors, else 2.
+    A case's ``stars`` count as that many more targets, made again: a pass over each star's frames,
+    one over the science target's, and its run per count above one (``steps.stars``; an
+    over-estimate)."""
     case, detectors = settings["case_config"], settings["detectors"]
     noisy = sum(d["photons_per_frame"] is not None for d in detectors.values())
     subpixel = sum(name != "cog" for name in registrations(settings))
     frame_ms = LUCKY_FRAME_MS + NOISY_FRAME_MS * noisy + SUBPIXEL_FRAME_MS * subpixel * len(detectors)
     if settings.get("fourier_fractions"):
         frame_ms += FOURIER_FRAME_MS * len(detectors) * len(registrations(settings)) + FOURIER_REDRAW_MS * noisy
-    targets = len(case["targets_arcsec"])
+    stars = case.get("stars")
+    extra = 0 if stars is None else len(stars["targets"]) + 1 + sum(n > 1 for n in stars["counts"])
+    targets = len(case["targets_arcsec"]) + extra
     frames_s = frame_count(case) * targets * (case["camera"]["n_pixels"] / 256) ** 2 * frame_ms / 1e3
     replayed = targets if settings.get("replay_frames", False) else targets - len(imaged_targets(case))
     steps = FrameClock.from_config(case).n_steps * replayed * (3 if noisy else 2)

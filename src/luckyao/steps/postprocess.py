@@ -23,6 +23,7 @@ from ..studyspec.lucky import by_signal
 from ..studyspec.lucky_settings import LuckySettings
 from .screens import read_screens
 from .simulation import Replay
+from .stars import stars_dataset
 
 log = logging.getLogger(__name__)
 
@@ -79,6 +80,23 @@ def _external_criteria(telemetry: xr.Dataset, target: int) -> list[ExternalCrite
     return external
 
 
+def _lucky_arguments(settings: LuckySettings, telemetry: xr.Dataset, target: int, peak: float) -> dict:
+    """A target's :func:`.pipeline.run_lucky_methods` arguments but its frames and references."""
+    return dict(
+        detectors=settings.detectors,
+        fractions=settings.fractions,
+        diffraction_limited_peak=peak,
+        pixel_scale_arcsec=settings.case.camera.pixel_scale_arcsec,
+        seed=target_seed(settings.seed, target),
+        criteria_external=_external_criteria(telemetry, target),
+        n_blocks=settings.error_blocks,
+        image_crop_px=settings.image_crop_px,
+        registrations=settings.registration_methods(),
+        matched_strehl=settings.matched_strehl(),
+        fourier_fractions=settings.fourier_fractions,
+    )
+
+
 def lucky_case(
     settings_config: dict, frames_path, telemetry_path, out_path, screens_path="", screens_metadata_path=""
 ) -> None:
@@ -94,27 +112,13 @@ def lucky_case(
     order = (
         list(range(n_targets)) if reference is None else [reference] + [t for t in range(n_targets) if t != reference]
     )  # the star first: the others take its measurements
-    registrations, matched_strehl = settings.registration_methods(), settings.matched_strehl()
     per_target = {}  # target -> its datasets, one per registration method (all made in the same passes)
     for target in order:
         log.info("target %d/%d, registration %s", target + 1, n_targets, ", ".join(settings.registrations))
         references = None if reference in (None, target) else [ImageReference.of(ds) for ds in per_target[reference]]
         frames, replay = _frames_of(settings, telemetry, target, frames_path, screens_path, screens_metadata_path)
         per_target[target] = run_lucky_methods(
-            frames,
-            n_frames,
-            settings.detectors,
-            settings.fractions,
-            peak,
-            settings.case.camera.pixel_scale_arcsec,
-            target_seed(settings.seed, target),
-            criteria_external=_external_criteria(telemetry, target),
-            references=references,
-            n_blocks=n_blocks,
-            image_crop_px=settings.image_crop_px,
-            registrations=registrations,
-            matched_strehl=matched_strehl,
-            fourier_fractions=settings.fourier_fractions,
+            frames, n_frames, references=references, **_lucky_arguments(settings, telemetry, target, peak)
         )
         if replay is not None:
             axis_strehl[target] = replay.axis_strehl[0]
@@ -126,7 +130,7 @@ def lucky_case(
             coords="minimal",
             compat="override",
         )
-        for m in range(len(registrations))
+        for m in range(len(settings.registrations))
     ]
     ds = xr.concat(per_registration, dim="registration", data_vars="all", coords="minimal", compat="override")
     ds = ds.assign_coords(
@@ -141,6 +145,14 @@ def lucky_case(
         )
     )
     ds.attrs.pop("frames_drawn_again", None)  # per target: in its log line
+    if "stars" in settings.case_config:  # the science target registered on several stars
+
+        def frames_of(target):
+            return _frames_of(settings, telemetry, target, frames_path, screens_path, screens_metadata_path)[0]
+
+        science = settings.case_config["stars"]["science_target"]
+        arguments = _lucky_arguments(settings, telemetry, science, peak)
+        ds = ds.merge(stars_dataset(settings, telemetry, per_target, frames_of, arguments))
     add_noise_flags(ds)  # where a noisy detector's scores are noise-dominated
     # computed in the settings' order (names as text: a detector's last bits depend on its place
     # in the stacks the BLAS products score), stored by signal

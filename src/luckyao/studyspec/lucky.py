@@ -5,7 +5,7 @@ import numpy as np
 
 from .schema import load_schema
 
-SIGNAL_KINDS = ("quality_vs_signal", "registration", "limiting_magnitude")
+SIGNAL_KINDS = ("quality_vs_signal", "registration", "limiting_magnitude", "more_stars")
 """The figure kinds drawn against the detector sweep: each case they draw must be one of
 ``lucky.detector_sweep.cases`` (``study.validate_study``)."""
 

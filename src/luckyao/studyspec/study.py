@@ -76,6 +76,8 @@ def _check_case(name: str, case: dict, turbulence: dict) -> None:
             f"config key '{where}.reference_target': {reference} is not the index of one of the "
             f"{len(case['targets_arcsec'])} targets_arcsec"
         )
+    if "stars" in case:
+        _check_stars(where, case)
     radius = turbulence["field_radius_arcsec"]
     for x, y in case["targets_arcsec"]:
         if (x * x + y * y) ** 0.5 > radius:
@@ -83,6 +85,26 @@ def _check_case(name: str, case: dict, turbulence: dict) -> None:
                 f"config key '{where}.targets_arcsec': target ({x}, {y}) lies beyond "
                 f"turbulence.field_radius_arcsec = {radius}"
             )
+
+
+def _check_stars(where: str, case: dict) -> None:
+    """A case's several stars: distinct targets, the brightest the reference target (flux ratio 1),
+    a flux ratio each, a science target that is none of them, counts within their number."""
+    stars, n_targets = case["stars"], len(case["targets_arcsec"])
+    targets = stars["targets"]
+    key = f"config key '{where}.stars"
+    if any(t >= n_targets for t in targets + [stars["science_target"]]):
+        raise ConfigError(f"{key}': targets and science_target must index the {n_targets} targets_arcsec")
+    if len(set(targets)) != len(targets) or stars["science_target"] in targets:
+        raise ConfigError(f"{key}.targets': must be distinct and exclude science_target {stars['science_target']}")
+    if targets[0] != case.get("reference_target"):
+        raise ConfigError(f"{key}.targets': the first (the brightest) must be reference_target")
+    if len(stars["flux_ratio"]) != len(targets) or stars["flux_ratio"][0] != 1:
+        raise ConfigError(f"{key}.flux_ratio': one per star, the first 1 (the brightest)")
+    if any(case["targets_arcsec"][t] == case["targets_arcsec"][stars["science_target"]] for t in targets):
+        raise ConfigError(f"{key}.targets': a star in the science target's direction (no anisoplanatism to weigh)")
+    if max(stars["counts"]) > len(targets):
+        raise ConfigError(f"{key}.counts': at most the {len(targets)} stars")
 
 
 def validate_study(config: dict, schema: dict | None = None) -> dict:
@@ -126,6 +148,13 @@ def validate_study(config: dict, schema: dict | None = None) -> dict:
         cases[name] = resolved
     problems += _replay_problems(config, cases)
     problems += _fourier_problems(config, cases)
+    if not any(d["photons_per_frame"] is None for d in config["lucky"]["detectors"].values()):
+        problems += [
+            f"config key 'cases.{name}.stars': needs a noiseless detector in lucky.detectors (each star's "
+            "noise is measured against its noiseless positions)"
+            for name, case in cases.items()
+            if "stars" in case
+        ]
     for fig_id, figure in config["figures"].items():
         try:
             _check_figure(fig_id, figure, cases, config)
@@ -288,6 +317,12 @@ def _check_figure(fig_id: str, figure: dict, cases: dict, config: dict) -> None:
                 raise ConfigError(
                     f"config key 'figures.{fig_id}.cases': case '{case}' has one target; "
                     "quality_vs_distance needs a field of targets"
+                )
+    if figure["kind"] == "more_stars":
+        for case in figure["cases"]:
+            if case in cases and "stars" not in cases[case]:
+                raise ConfigError(
+                    f"config key 'figures.{fig_id}.cases': case '{case}' has no stars (more_stars draws them)"
                 )
     for case in figure["cases"]:
         if case not in cases:  # invalid itself: reported with the cases
