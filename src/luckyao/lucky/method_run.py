@@ -28,10 +28,10 @@ from .dataset import (
 )
 from .detector import Detector
 from .guesses import GuessedBins
-from .metrics import d50_from_radius, score_images
+from .metrics import d50_from_radius, score_images, strehl_flux
 from .ranking import criterion_bins
 from .registration import FrameSpectra, Registration, shifts_of
-from .scoring import score_partial_sums, value_at_peak
+from .scoring import expected_fluxes, score_partial_sums, value_at_peak
 
 
 class FrameValues:
@@ -318,9 +318,22 @@ class MethodRun:
         """Score the rows of criteria ``crits`` (contiguous) of every block the chunk ``sl`` completes."""
         blocks = self.blocks
         for block, rows in self.sums.completed_blocks(sl, crits):
-            _, *scores = score_partial_sums(rows, len(crits), blocks.n_bins, blocks.last_bin, self.accumulation.score)
+            in_block = slice(block * blocks.block_frames, (block + 1) * blocks.block_frames)
+            expected = self._expected(blocks.bins[:, crits[0] : crits[-1] + 1, in_block], blocks.last_bin, in_block)
+            _, *scores = score_partial_sums(
+                rows, len(crits), blocks.n_bins, blocks.last_bin, self.accumulation.score, expected
+            )
             for values, score in zip(blocks.values, scores):
                 values[block, crits[0] : crits[-1] + 1] = score
+
+    def _expected(self, bins: np.ndarray, last_bin: np.ndarray, frames: slice = slice(None)) -> np.ndarray | None:
+        """The expected flux (criterion, fraction, det) of the integrated images of the frames
+        ``frames`` in ``bins`` (det, criterion, frames) (:func:`.scoring.expected_fluxes`), their
+        Strehl's flux; None with noiseless detectors only (every Strehl over its measured flux)."""
+        estimate = self.run.flux_estimate[:, frames]
+        if np.isnan(estimate).all():
+            return None
+        return expected_fluxes(estimate, bins, last_bin)
 
     def score(self, long_none: np.ndarray, image_crop_px: int | None) -> xr.Dataset:
         """Score the integrated images (cumulative sums of bins) and the long exposures (``long_none``,
@@ -330,27 +343,39 @@ class MethodRun:
         lc = sums.long_exposure_row
         long_registered = sums.detected[:, lc]
         frame_recentred_strehl = value_at_peak(
-            frames.in_window, accumulation.window, accumulation.images(long_registered), frames.flux, run.peak
+            frames.in_window,
+            accumulation.window,
+            accumulation.images(long_registered),
+            strehl_flux(frames.flux, run.flux_estimate),
+            run.peak,
         )
         scoring = (n_crit, sums.n_bins, sums.last_bin, accumulation.score)
+        long_expected = run.flux_estimate.sum(axis=1)  # (det,): every frame; NaN for a noiseless detector
         for i, detector in enumerate(run.detectors):
             if detector.noiseless:
                 sums.noiseless[i] = sums.detected[i, :lc]
         noiseless_scores = score_partial_sums(sums.noiseless, *scoring)[1:]
         sums.noiseless = sums.noiseless_rows = None
+        long_expected = None if np.isnan(long_expected).all() else long_expected  # noiseless only: measured
         if isinstance(accumulation, WholeFrames):  # both long exposures whole: scored together
             long_images = np.stack([long_none, long_registered])  # (recentring, det, n, n)
-            long_scores, long_flux = accumulation.score(long_images), None
+            long_scores = accumulation.score(
+                long_images, None if long_expected is None else np.stack([long_expected] * 2)
+            )
+            long_flux = None
         else:
             long_images = [long_none, accumulation.images(long_registered).copy()]
             long_flux = [None, accumulation.flux(long_registered).copy()]
             long_scores = [
                 np.stack(pair)
                 for pair in zip(
-                    score_images(long_none, run.peak, run.scale, run.encircled), accumulation.score(long_registered)
+                    score_images(long_none, run.peak, run.scale, run.encircled, long_expected),
+                    accumulation.score(long_registered, long_expected),
                 )
             ]
-        integrated, *run_scores = score_partial_sums(sums.detected[:, :lc], *scoring)
+        integrated, *run_scores = score_partial_sums(
+            sums.detected[:, :lc], *scoring, self._expected(self.bins, sums.last_bin)
+        )
         sums.detected = sums.detected_rows = long_registered = None
         ds = result_dataset(
             run.detectors,
