@@ -47,7 +47,9 @@ API_MODULES = {
         "luckyao.lucky.ranking",
         "luckyao.lucky.registration",
         "luckyao.lucky.scoring",
+        "luckyao.lucky.limits",
         "luckyao.lucky.pipeline",
+        "luckyao.photometry",
     ],
     "Study configuration": [
         "luckyao.studyspec.schema",
