@@ -47,8 +47,10 @@ API_MODULES = {
         "luckyao.lucky.ranking",
         "luckyao.lucky.registration",
         "luckyao.lucky.scoring",
+        "luckyao.lucky.limits",
         "luckyao.lucky.pipeline",
         "luckyao.lucky.fourier",
+        "luckyao.photometry",
     ],
     "Study configuration": [
         "luckyao.studyspec.schema",

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from luckyao.lucky.detector import Detector
-from luckyao.lucky.fourier import FourierSelection, TopAmplitudes, amplitudes, spectra_of
+from luckyao.lucky.fourier import FourierRun, FourierSelection, TopAmplitudes, amplitudes, spectra_of
 from luckyao.lucky.pipeline import ImageReference, run_lucky_methods
 from luckyao.lucky.ranking import fraction_counts
 from luckyao.lucky.registration import Registration
@@ -16,23 +16,42 @@ from luckyao.optics.pupil import Telescope
 C = 16  # crop across [pixel]
 
 
-def fourier_of(crops: np.ndarray, fractions, chunk: int = 7) -> FourierSelection:
-    """The Fourier selection of crops (k, C, C) fed in chunks of ``chunk`` frames, both passes."""
-    selection = FourierSelection(1, len(crops), fractions, crops.shape[-1], chunk)
+def fourier_run(crops: np.ndarray, fractions, chunk: int = 7, n_blocks: int = 0) -> FourierRun:
+    """The Fourier selection of crops (k, C, C) fed in chunks of ``chunk`` frames, both passes, over
+    the whole run and ``n_blocks`` time blocks."""
+    run = FourierRun(1, len(crops), fractions, crops.shape[-1], chunk, n_blocks)
     for start in range(0, len(crops), chunk):
-        selection.observe(0, crops[start : start + chunk])
-    selection.rank()
+        run.observe(0, crops[start : start + chunk], start)
+    run.rank()
     for start in range(0, len(crops), chunk):
         part = crops[start : start + chunk]
-        selection.add(0, part, part.sum(axis=(1, 2), dtype=np.float64))
-    return selection
+        run.add(0, part, part.sum(axis=(1, 2), dtype=np.float64), start)
+    return run
+
+
+def fourier_of(crops: np.ndarray, fractions, chunk: int = 7) -> FourierSelection:
+    """The whole run's selection of :func:`fourier_run`."""
+    return fourier_run(crops, fractions, chunk).whole
+
+
+def test_each_time_block_is_selected_as_a_run_of_its_own_frames():
+    """The blocks' selections (the Monte-Carlo errors): block ``b`` of a run, fed in chunks that
+    straddle the blocks' edges, gives the images of a run over block ``b``'s frames alone; the
+    frames past the last block are in none."""
+    crops = np.random.default_rng(5).random((47, C, C)).astype(np.float32)
+    run = fourier_run(crops, [0.1, 0.5, 1.0], chunk=7, n_blocks=3)  # blocks of 15 frames, 2 left out
+    assert run.block_frames == 15
+    for b, block in enumerate(run.blocks):
+        alone = fourier_of(crops[15 * b : 15 * (b + 1)], [0.1, 0.5, 1.0], chunk=4)
+        np.testing.assert_array_equal(block.kept, alone.kept)
+        np.testing.assert_allclose(block.images([True])[0], alone.images([True])[0], rtol=0, atol=1e-12)
 
 
 def test_identical_frames_combine_to_the_frame():
     """Every amplitude ties at every frequency: any n_f frames average to the frame itself."""
     frame = np.random.default_rng(1).random((C, C)).astype(np.float32)
     crops = np.repeat(frame[None], 23, axis=0)
-    images, flux = fourier_of(crops, [0.05, 0.3, 1.0]).images([True])
+    images, flux, _ = fourier_of(crops, [0.05, 0.3, 1.0]).images([True])
     for image, f in zip(images[0, 0], flux[0, 0]):
         np.testing.assert_allclose(image, frame, rtol=0, atol=1e-12)
         assert f == pytest.approx(frame.sum(dtype=np.float64), rel=1e-15)
@@ -76,7 +95,7 @@ def test_selection_is_hermitian_so_the_image_is_real():
     for column in (0, C // 2):
         np.testing.assert_array_equal(amp[:, :, column], amp[:, mirror, column])
     selection = fourier_of(crops, [0.1])
-    images, _ = selection.images([True])
+    images, _, _ = selection.images([True])
     # the full plane: kept frames at (ky, kx) for kx <= C/2 from the half plane, else from (-ky, -kx)
     keep = np.zeros((30, C, C), bool)
     half = np.zeros((30, amp[0].size), bool)
@@ -173,7 +192,7 @@ def test_fourier_selection_beats_frame_selection_on_positive_spectra():
         blur = np.exp(-0.5 * ((u / a) ** 2 + (v / b) ** 2))
         crops.append(blur / blur.sum())
     crops = np.array(crops, np.float32)
-    images, flux = fourier_of(crops, [0.1]).images([True])
+    images, flux, _ = fourier_of(crops, [0.1]).images([True])
     best = np.argsort(-crops.max(axis=(1, 2)), kind="stable")[:4]
     frame_selected = crops[best].astype(np.float64).mean(axis=0)
     assert images[0, 0, 0].max() / flux[0, 0, 0] > 1.05 * frame_selected.max() / frame_selected.sum()

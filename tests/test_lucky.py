@@ -90,9 +90,25 @@ def chunker(frames, size):
     return lambda: ((s, frames[s : s + size]) for s in range(0, len(frames), size))
 
 
-def brute_force_image(frames_e, order, count, centroid_frames=None):
+def strehl_flux_of(frames, detector, order, count):
+    """The flux a Strehl of the best ``count`` noiseless unit-flux ``frames`` detected by
+    ``detector`` is over: a noisy detector's expected flux, N times the noiseless frames' sum
+    (:func:`luckyao.lucky.metrics.strehl_flux`); None for the noiseless detector (its image's sum)."""
+    if detector.noiseless:
+        return None
+    return detector.photons_per_frame * sum(frames[f].sum(dtype=np.float64) for f in order[:count])
+
+
+def brute_force_strehl(frames_e, order, count, peak, flux=None, centroid_frames=None):
+    """The Strehl of :func:`brute_force_image` over ``flux`` (None: the image's sum)."""
+    raw = brute_force_image(frames_e, order, count, centroid_frames, normalise=False)
+    return float(raw.max() / (peak * (raw.sum() if flux is None else flux)))
+
+
+def brute_force_image(frames_e, order, count, centroid_frames=None, normalise=True):
     """Sum of the best `count` frames, each rolled to put its centroid nearest n/2 (np.roll);
-    with `centroid_frames`, each frame is rolled by the shift of its counterpart there."""
+    with `centroid_frames`, each frame is rolled by the shift of its counterpart there; over its
+    flux (``normalise``)."""
     n = frames_e.shape[-1]
     total = np.zeros((n, n))
     for f in order[:count]:
@@ -100,7 +116,7 @@ def brute_force_image(frames_e, order, count, centroid_frames=None):
         ref = frame if centroid_frames is None else centroid_frames[f].astype(np.float64)
         c = [(ref.sum(axis=1 - a) * np.arange(n)).sum() / ref.sum() for a in (0, 1)]
         total += np.roll(frame, (int(np.floor(n / 2 - c[0] + 0.5)), int(np.floor(n / 2 - c[1] + 0.5))), axis=(0, 1))
-    return total / total.sum()
+    return total / total.sum() if normalise else total
 
 
 def test_run_lucky_matches_brute_force_for_every_criterion_and_fraction():
@@ -139,7 +155,11 @@ def test_run_lucky_matches_brute_force_for_every_criterion_and_fraction():
     assert list(ds.criterion.values) == ["strehl", "d50", "lgs_rms"]
     for i, det in enumerate(detectors):
         noisy = detect(frames, det, seed)  # keyed per frame: the chunking does not matter
-        np.testing.assert_allclose(ds.frame_strehl[i], strehl(noisy, peak), rtol=1e-12)
+        if det.noiseless:
+            np.testing.assert_allclose(ds.frame_strehl[i], strehl(noisy, peak), rtol=1e-12)
+        else:  # over the frame's expected flux, N times the noiseless frame's, not its noisy sum
+            expected_flux = det.photons_per_frame * frames.sum(axis=(1, 2), dtype=np.float64)
+            np.testing.assert_allclose(ds.frame_strehl[i], noisy.max(axis=(1, 2)) / (peak * expected_flux), rtol=1e-12)
         for name, values, larger in [
             ("strehl", ds.frame_strehl[i].values, True),
             ("d50", ds.frame_d50_arcsec[i].values, False),
@@ -152,7 +172,7 @@ def test_run_lucky_matches_brute_force_for_every_criterion_and_fraction():
                 got = ds.image.sel(criterion=name, fraction=fraction, detector=det.name).values
                 np.testing.assert_allclose(got, expected, rtol=1e-5, atol=1e-7)
                 assert ds.strehl.sel(criterion=name, fraction=fraction, detector=det.name) == pytest.approx(
-                    float(expected.max() / peak), rel=1e-5
+                    brute_force_strehl(noisy, order, count, peak, strehl_flux_of(frames, det, order, count)), rel=1e-5
                 )
                 clean = brute_force_image(frames, order, count, centroid_frames=noisy)
                 assert ds.strehl_noiseless.sel(criterion=name, fraction=fraction, detector=det.name) == pytest.approx(
@@ -215,13 +235,13 @@ def test_guessed_bins_of_noisy_frames_are_corrected_to_each_block_and_run_select
             frame_ids = range(first, first + count_of)
             order = sorted(frame_ids, key=lambda f: ((-1 if larger else 1) * values[f], f))
             for fraction, count in zip(fractions, fraction_counts(count_of, fractions)):
-                expected = brute_force_image(noisy, order, count)
+                expected = brute_force_strehl(noisy, order, count, peak, strehl_flux_of(frames, det, order, count))
                 got = (
                     ds.strehl.sel(criterion=name, fraction=fraction, detector="emccd")
                     if block is None
                     else ds.strehl_block.sel(block=block, criterion=name, fraction=fraction, detector="emccd")
                 )
-                assert float(got) == pytest.approx(float(expected.max() / peak), rel=1e-9), (block, name, fraction)
+                assert float(got) == pytest.approx(expected, rel=1e-9), (block, name, fraction)
                 if block is None:
                     clean = brute_force_image(frames, order, count, centroid_frames=noisy)
                     assert float(

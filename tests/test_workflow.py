@@ -16,7 +16,7 @@ import pytest
 import xarray as xr
 import yaml
 
-from luckyao.figures.registration import i_magnitude
+from luckyao.photometry import Photometry, collecting_area_m2
 
 from studies import REPO, TINY, snakemake, with_sweep
 
@@ -540,7 +540,10 @@ def test_registration_methods_along_their_dimension_and_the_knees(finished_run):
     for metric in ("strehl", "d50_arcsec"):
         knee = figure[f"{metric}_knee_photons"].sel(case="lgs", criterion=["strehl"])
         np.testing.assert_array_equal(limiting[f"{metric}_knee_photons"].isel(series=0, diameter=0), knee)
-        np.testing.assert_allclose(limiting[f"{metric}_knee_i_mag"].isel(series=0, diameter=0), i_magnitude(knee))
+        np.testing.assert_allclose(
+            limiting[f"{metric}_knee_i_mag"].isel(series=0, diameter=0),
+            Photometry.from_config().magnitude(knee, collecting_area_m2(4.2, 1.2), 0.01),
+        )
 
 
 def test_without_frame_cubes_every_result_is_the_stored_cubes_bit_for_bit(finished_run, tmp_path):

@@ -263,11 +263,13 @@ def cmd_knees(args) -> None:
     ):
         if value not in data[coord].values:
             raise ValueError(f"{key} {value}: '{args.data}' has {list(data[coord].values)}")
+    band = data.attrs.get("photometric_band", "I")
     sys.stdout.write(
         f"Knees at {100 * fraction:g} % of frames, selection by {args.criterion}, read noise "
         f"{args.read_noise:g} e-: the signal from which the integrated Strehl keeps 90 % of its "
-        "noiseless value and d50 stays within 10 % of it (I magnitude: "
-        f"{float(data.attrs['i_zero_photons_per_frame']):.3g} photons per frame at I = 0)\n\n"
+        f"noiseless value and d50 stays within 10 % of it ({band} magnitude: "
+        f"{float(data.attrs['i_zero_photons_per_frame']):.3g} photons per frame at {band} = 0, "
+        "the figure's photometric scale)\n\n"
     )
     sys.stdout.write(knee_markdown(data, fraction, args.criterion, args.read_noise) + "\n")
 

@@ -26,7 +26,8 @@ from luckyao.jobs.resources import (
     turbulence_memory_bytes,
 )
 from luckyao.io.hashing import canonical_json, sha256
-from luckyao.studyspec.lucky import SIGNAL_KINDS, sweep_detectors
+from luckyao.photometry import config_with_defaults
+from luckyao.studyspec.lucky import MAGNITUDE_KINDS, SIGNAL_KINDS, sweep_detectors
 from luckyao.studyspec.overrides import added_cases, typed
 from luckyao.studyspec.resolved import imaged_targets
 from luckyao.studyspec.schema import ConfigError
@@ -134,11 +135,13 @@ wildcard_constraints:
 
 def figure_settings(fig):
     """The figure's config, its cases' resolved configs, the seed, and what some kinds need
-    besides: the detector sweep's detectors, a sweep's grid points."""
+    besides: the detector sweep's detectors, a sweep's grid points, the photometric scale."""
     figure = STUDY["figures"][fig]
     extra = {}
     if figure["kind"] in SIGNAL_KINDS:
         extra["sweep_detectors"] = sweep_detectors(STUDY["lucky"])
+    if figure["kind"] in MAGNITUDE_KINDS:  # the magnitude scale: only these figures redrawn when it changes
+        extra["photometry"] = config_with_defaults(STUDY.get("photometry"))
     if "sweep" in figure:
         # each point's values as (path, value) pairs: in the sweep's order (a dict's keys would be
         # sorted as text in the settings' canonical JSON, and the first parameter is the default x)

@@ -11,6 +11,14 @@ from .settings import FigureSettings, case_coords
 from .style import CRITERIA, LINE_STYLES, MARKERS, METRICS, SCREEN_INCHES, colour, fraction_axis, new_figure
 
 FOURIER_METRICS = ("strehl", "d50_arcsec")
+FOURIER_VARIABLES = (
+    "fourier_strehl",
+    "fourier_d50_arcsec",
+    "fourier_d50_beyond_crop",
+    "fourier_strehl_error",
+    "fourier_d50_arcsec_error",
+)
+"""A lucky dataset's Fourier variables the figure takes at its detector (the errors: with time blocks)."""
 
 
 def fourier_data(settings: FigureSettings, datasets) -> xr.Dataset:
@@ -32,18 +40,25 @@ def fourier_data(settings: FigureSettings, datasets) -> xr.Dataset:
     shape = (len(methods), len(cases))
     n_c, n_f, n_r, n_s = len(criteria), len(fractions), len(read_noise), len(signal)
     values = {metric: np.full((*shape, n_c, n_f), np.nan) for metric in FOURIER_METRICS}
-    values |= {f"fourier_{metric}": np.full((*shape, n_f), np.nan) for metric in FOURIER_METRICS}
+    values |= {f"{metric}_error": np.full((*shape, n_c, n_f), np.nan) for metric in FOURIER_METRICS}
+    values |= {
+        f"fourier_{metric}{e}": np.full((*shape, n_f), np.nan) for metric in FOURIER_METRICS for e in ("", "_error")
+    }
     values["fourier_d50_beyond_crop"] = np.zeros((*shape, n_f), np.int8)
     values["strehl_noiseless"] = np.full((*shape, n_c, n_f, n_r, n_s), np.nan)
     values["fourier_strehl_noiseless"] = np.full((*shape, n_f, n_r, n_s), np.nan)
+    values["fourier_strehl_noiseless_error"] = np.full((*shape, n_f, n_r, n_s), np.nan)
     for i, row in enumerate(cells):
         for c, ds in enumerate(row):
             if ds is None:
                 continue
             for metric in FOURIER_METRICS:
-                values[metric][i, c] = ds[metric].sel(criterion=criteria, detector=detector, fraction=fractions)
-            for name in ("fourier_strehl", "fourier_d50_arcsec", "fourier_d50_beyond_crop"):
-                values[name][i, c] = ds[name].sel(detector=detector, fourier_fraction=fractions)
+                for name in (metric, f"{metric}_error"):
+                    if name in ds:  # errors: with time blocks
+                        values[name][i, c] = ds[name].sel(criterion=criteria, detector=detector, fraction=fractions)
+            for name in FOURIER_VARIABLES:
+                if name in ds:
+                    values[name][i, c] = ds[name].sel(detector=detector, fourier_fraction=fractions)
             for r, noise in enumerate(read_noise):
                 for k, n in enumerate(signal):
                     name = _named(ds, noise, n)
@@ -51,19 +66,22 @@ def fourier_data(settings: FigureSettings, datasets) -> xr.Dataset:
                         values["strehl_noiseless"][i, c, :, :, r, k] = ds.strehl_noiseless.sel(
                             criterion=criteria, fraction=fractions, detector=name
                         )
-                        values["fourier_strehl_noiseless"][i, c, :, r, k] = ds.fourier_strehl_noiseless.sel(
-                            fourier_fraction=fractions, detector=name
-                        )
+                        for var in ("fourier_strehl_noiseless", "fourier_strehl_noiseless_error"):
+                            if var in ds:
+                                values[var][i, c, :, r, k] = ds[var].sel(fourier_fraction=fractions, detector=name)
     dims = {
         "strehl": ("criterion", "fraction"),
         "d50_arcsec": ("criterion", "fraction"),
+        "strehl_error": ("criterion", "fraction"),
+        "d50_arcsec_error": ("criterion", "fraction"),
         "strehl_noiseless": ("criterion", "fraction", "read_noise", "signal"),
         "fourier_strehl_noiseless": ("fraction", "read_noise", "signal"),
+        "fourier_strehl_noiseless_error": ("fraction", "read_noise", "signal"),
     }
     data = {
         name: (("registration", "case", *dims.get(name, ("fraction",))), value, dict(template[name].attrs))
         for name, value in values.items()
-        if read_noise or "noiseless" not in name
+        if (read_noise or "noiseless" not in name) and name in template
     }
     coords = {
         **case_coords(settings, datasets),
@@ -75,6 +93,11 @@ def fourier_data(settings: FigureSettings, datasets) -> xr.Dataset:
         coords["read_noise"] = ("read_noise", read_noise, {"units": "1", "long_name": "read noise rms per pixel in e-"})
         coords["signal"] = ("signal", signal, {"units": "1", "long_name": "detected photons per lucky frame (a count)"})
     return xr.Dataset(data, coords=coords, attrs={"detector": detector})
+
+
+def _error(ds: xr.Dataset, name: str, at: dict):
+    """``name``'s Monte-Carlo error at ``at`` (±1 sigma error bars), or None (no time blocks)."""
+    return ds[f"{name}_error"].sel(**at).values if f"{name}_error" in ds else None
 
 
 def _methods(ds: xr.Dataset) -> list[str]:
@@ -114,22 +137,24 @@ def draw_fourier(ds: xr.Dataset, title: str):
             for k, case in enumerate(ds.case.values):
                 if metric == "signal":
                     x = ds.signal.values
-                    fourier = at.fourier_strehl_noiseless.sel(case=case, read_noise=cell[0], fraction=cell[1])
-                    saa = [
-                        at.strehl_noiseless.sel(case=case, criterion=c, read_noise=cell[0], fraction=cell[1])
-                        for c in ds.criterion.values
-                    ]
+                    cell_at = {"case": case, "read_noise": cell[0], "fraction": cell[1]}
+                    fourier = at.fourier_strehl_noiseless.sel(**cell_at)
+                    fourier_error = _error(at, "fourier_strehl_noiseless", cell_at)
+                    saa = [at.strehl_noiseless.sel(criterion=c, **cell_at) for c in ds.criterion.values]
+                    saa_error = [None] * len(saa)  # the noiseless scores of shift-and-add: no blocks
                 else:
                     x = percent
                     fourier = at[f"fourier_{metric}"].sel(case=case).values
+                    fourier_error = _error(at, f"fourier_{metric}", {"case": case})
                     saa = [at[metric].sel(case=case, criterion=c) for c in ds.criterion.values]
+                    saa_error = [_error(at, metric, {"case": case, "criterion": c}) for c in ds.criterion.values]
                     if metric == "d50_arcsec":
                         bound = at.fourier_d50_beyond_crop.sel(case=case).values.astype(bool)
                         ax.plot(x[bound], fourier[bound], ls="", marker="o", ms=9, mfc="none", color=colour(k))
-                ax.plot(x, fourier, color=colour(k), ls="-", marker="o", ms=5, lw=1.6)
-                for j, values in enumerate(saa):
+                ax.errorbar(x, fourier, fourier_error, color=colour(k), ls="-", marker="o", ms=5, lw=1.6, capsize=2)
+                for j, (values, error) in enumerate(zip(saa, saa_error)):
                     style = {"ls": LINE_STYLES[(j + 1) % 4], "marker": MARKERS[(j + 1) % 8]}
-                    ax.plot(x, values, color=colour(k), ms=4, lw=1.0, **style)
+                    ax.errorbar(x, values, error, color=colour(k), ms=4, lw=1.0, capsize=2, **style)
             if metric == "signal":
                 ax.set_xscale("log")
                 ax.set_xlabel("detected photons per frame")

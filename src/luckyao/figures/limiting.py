@@ -4,8 +4,8 @@ For each case of a ``limiting_magnitude`` figure (series and diameters as
 ``quality_vs_diameter``: :func:`.diameter.series_points`), the knees of the detector sweep
 (:func:`.registration.knees`: the signal from which the integrated image keeps 90 % of its
 noiseless Strehl, or its d50 within 10 %) per registration method, converted to the I
-magnitude of a star giving that signal through the case's own collecting area
-(:func:`.registration.i_magnitude`: the same zero point, band, throughput and 100 Hz frames
+magnitude of a star giving that signal through the case's own collecting area in its frames
+(:mod:`luckyao.photometry`: the figure's ``photometry``, the same zero point, band and throughput
 at every size). A larger aperture collects more photons of the same star, and AO-corrected
 frames concentrate them: the knee moves to fainter stars.
 """
@@ -13,8 +13,9 @@ frames concentrate them: the knee moves to fainter stars.
 import numpy as np
 import xarray as xr
 
+from ..photometry import Photometry, case_aperture
 from .diameter import series_points
-from .registration import REGISTRATION_METRICS, collecting_area_m2, i_magnitude, registration_data
+from .registration import REGISTRATION_METRICS, registration_data
 from .settings import FigureSettings
 from .style import LINE_STYLES, MARKERS, colour, new_figure
 
@@ -33,15 +34,15 @@ def limiting_magnitude_data(settings: FigureSettings, datasets) -> xr.Dataset:
     knee_dims = [d for d in signals["strehl_knee_photons"].dims if d != "case"]  # registration, criterion, ...
     shape = (len(series), len(diameters)) + tuple(signals.sizes[d] for d in knee_dims)
     faintest = float(signals.signal.values[0])
+    photometry = Photometry.from_config(settings.photometry)
     data = {}
     for metric in REGISTRATION_METRICS:
         photons, magnitude = np.full(shape, np.nan), np.full(shape, np.nan)
         for (label, diameter), i in where.items():
-            telescope = settings.case(settings.cases[i]).telescope
-            area = collecting_area_m2(telescope.diameter_m, telescope.obscuration_m)
             knee = signals[f"{metric}_knee_photons"].isel(case=i).transpose(*knee_dims).values
             cell = series.index(label), diameters.index(diameter)
-            photons[cell], magnitude[cell] = knee, i_magnitude(knee, area)
+            photons[cell] = knee
+            magnitude[cell] = photometry.magnitude(knee, *case_aperture(settings.case_configs[settings.cases[i]]))
         dims = ("series", "diameter", *knee_dims)
         data[f"{metric}_knee_photons"] = (
             dims,
@@ -74,9 +75,8 @@ def limiting_magnitude_data(settings: FigureSettings, datasets) -> xr.Dataset:
         "case": (("series", "diameter"), cases.astype(str), {"long_name": "the case of each point ('' none)"}),
     }
     coords.update({d: signals[d] for d in knee_dims})
-    return xr.Dataset(
-        data, coords=coords, attrs={k: v for k, v in signals.attrs.items() if k != "i_zero_photons_per_frame"}
-    )
+    dropped = ("i_zero_photons_per_frame", "photometric_apertures")  # per case: each its own aperture
+    return xr.Dataset(data, coords=coords, attrs={k: v for k, v in signals.attrs.items() if k not in dropped})
 
 
 def draw_limiting_magnitude(ds: xr.Dataset, title: str):
@@ -102,7 +102,7 @@ def draw_limiting_magnitude(ds: xr.Dataset, title: str):
                 )
                 ax.plot(ds.diameter.values[bound], magnitude[bound], "o", ms=9, mfc="none", color=colour(s))
         ax.set_xlabel("telescope diameter [m]")
-        ax.set_ylabel("limiting I magnitude (fainter up)")
+        ax.set_ylabel(f"limiting {ds.attrs.get('photometric_band', 'I')} magnitude (fainter up)")
         ax.set_title(KNEE_LABELS[metric], loc="left", fontsize=9)
         ax.grid(alpha=0.3)
     fig.legend(

@@ -1,11 +1,14 @@
 """An off-axis target registered on 1, 2, 4... stars (a case's ``stars``): its integrated Strehl
 and d50 against the brightest star's detected signal, and the knees against the number of stars."""
 
+from functools import partial
+
 import numpy as np
 import xarray as xr
 from matplotlib.ticker import FormatStrFormatter, LogLocator, NullFormatter
 
-from .registration import REGISTRATION_METRICS, i_magnitude, knees, photons_per_frame
+from ..photometry import magnitude_of, photons_of
+from .registration import REGISTRATION_METRICS, knees, zero_magnitude_photons
 from .settings import FigureSettings, case_coords
 from .style import CRITERIA, LINE_STYLES, MARKERS, METRICS, colour, new_figure
 
@@ -73,6 +76,15 @@ def more_stars_data(settings: FigureSettings, datasets) -> xr.Dataset:
                 {"units": "1", "long_name": "the brightest star's detected photons per frame"},
             ),
             "axis": ("axis", ["y", "x"], {"long_name": "image axis"}),
+            "zero_magnitude_photons_per_frame": (
+                "case",
+                zero_magnitude_photons(settings),
+                {
+                    "units": "1",
+                    "long_name": "detected photons per frame of a magnitude-0 star through the case's aperture "
+                    "in its frames (luckyao.photometry; the magnitude axis)",
+                },
+            ),
             "pixel_scale_arcsec": ((), settings.case(settings.cases[0]).camera.pixel_scale_arcsec, {"units": "arcsec"}),
         },
     )
@@ -119,8 +131,11 @@ def draw_more_stars(ds: xr.Dataset, title: str):
             ax.set_xlabel("brightest star's photons per frame", fontsize=8)
             ax.set_ylabel(METRICS[metric])
             ax.grid(alpha=0.3)
-            top = ax.secondary_xaxis("top", functions=(i_magnitude, photons_per_frame))
-            magnitudes = i_magnitude(ds.signal.values[[-1, 0]])
+            zero = float(ds.zero_magnitude_photons_per_frame.sel(case=case))
+            top = ax.secondary_xaxis(
+                "top", functions=(partial(magnitude_of, zero_photons=zero), partial(photons_of, zero_photons=zero))
+            )
+            magnitudes = magnitude_of(ds.signal.values[[-1, 0]], zero)
             top.set_xticks(np.arange(np.ceil(magnitudes[0]), np.floor(magnitudes[1]) + 1, 2))
             top.xaxis.set_major_formatter(FormatStrFormatter("%g"))
             top.xaxis.set_minor_formatter(NullFormatter())

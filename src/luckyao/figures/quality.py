@@ -18,9 +18,11 @@ from .style import (
     band,
     colour,
     fraction_axis,
+    limit_flags,
     new_figure,
     parameter,
     series_fraction_lines,
+    unflagged,
     with_error,
 )
 
@@ -41,10 +43,9 @@ def _noise_flags(data: dict, dims, rows) -> None:
 
 
 def _drawn(values: xr.Dataset, metric: str) -> np.ndarray:
-    """A curve's values with its noise-dominated points left out (NaN)."""
-    y = np.array(values[metric].values, dtype=float)
-    flag = f"{metric}_noise_dominated"
-    return np.where(values[flag].values.astype(bool), np.nan, y) if flag in values else y
+    """A curve's values with its flagged points left out (NaN): noise-dominated, beyond the
+    diffraction limit, a d50 set by the field (:func:`.style.unflagged`)."""
+    return unflagged(values, metric)
 
 
 def quality_vs_fraction_data(settings: FigureSettings, datasets) -> xr.Dataset:
@@ -53,7 +54,7 @@ def quality_vs_fraction_data(settings: FigureSettings, datasets) -> xr.Dataset:
     data_vars = {}
     rows = [ds.sel(criterion=criteria, detector=detector).isel(target=0) for ds in datasets]
     for metric in METRICS:
-        for name in with_error(datasets, metric):
+        for name in with_error(datasets, metric) + limit_flags(datasets, metric):
             data_vars[name] = (
                 ("case", "criterion", "fraction"),
                 np.array([row[name].values for row in rows]),
@@ -87,15 +88,24 @@ def _case_style(ds: xr.Dataset, case) -> dict:
 
 
 def _legend_note(ds: xr.Dataset) -> str:
-    dropped = any(int(ds[v].sum()) for v in ds.data_vars if v.endswith("_noise_dominated"))
-    return (
+    """What the drawing left out, by flag (none set: nothing said)."""
+
+    def flagged(suffix: str) -> bool:
+        return any(int(ds[v].sum()) for v in ds.data_vars if v.endswith(suffix))
+
+    notes = [
         (
-            f"\nnoise-dominated points (more than {NOISE_DOMINATED:.0%} off the same selection on the noiseless "
-            "frames) left out"
-        )
-        if dropped
-        else ""
-    )
+            "_noise_dominated",
+            f"noise-dominated points (more than {NOISE_DOMINATED:.0%} off the same selection on the noiseless "
+            "frames) left out",
+        ),
+        (
+            "_beyond_diffraction_limit",
+            "points beyond the diffraction limit (Strehl above 1, FWHM or d50 below) left out",
+        ),
+        ("_field_bound", "d50 set by the field (a lower bound) left out"),
+    ]
+    return "".join(f"\n{note}" for suffix, note in notes if flagged(suffix))
 
 
 COINCIDE_RTOL = 1e-5
@@ -206,7 +216,7 @@ def quality_vs_distance_data(settings: FigureSettings, datasets) -> xr.Dataset:
             dict(first[name].attrs),
         )
         for metric in METRICS
-        for name in with_error(datasets, metric)
+        for name in with_error(datasets, metric) + limit_flags(datasets, metric)
     }
     data["long_exposure_strehl"] = (
         ("case", "distance"),
@@ -247,7 +257,7 @@ def draw_quality_vs_distance(ds: xr.Dataset, title: str):
                     cell = ds.sel(case=case, criterion=criterion, fraction=fraction)
                     ax.plot(
                         ds.distance,
-                        cell[metric],
+                        unflagged(cell, metric),
                         marker=MARKERS[k % 8],
                         ms=3.5,
                         color=shade,
@@ -282,7 +292,7 @@ def draw_quality_vs_distance(ds: xr.Dataset, title: str):
         ncol=3,
         fontsize=8,
         title="colour: case; line style and marker: fraction of frames\nimage criteria and recentring "
-        "from the on-axis star, lgs_rms along each target\nbands: ±1 Monte-Carlo standard error",
+        "from the on-axis star, lgs_rms along each target\nbands: ±1 Monte-Carlo standard error" + _legend_note(ds),
         title_fontsize=8,
     )
     fig.suptitle(f"{title}: integrated-image quality vs off-axis distance ({ds.attrs['detector']} detector)")

@@ -3,11 +3,13 @@ the signal as an I magnitude, and the knees: the signal below which a method los
 noiseless quality."""
 
 from dataclasses import replace
+from functools import partial
 
 import numpy as np
 import xarray as xr
 from matplotlib.ticker import FormatStrFormatter, LogLocator, NullFormatter
 
+from ..photometry import Photometry, case_aperture, magnitude_of, photons_of
 from .settings import FigureSettings
 from .signal import signal_data
 from .style import CRITERIA, LINE_STYLES, MARKERS, METRICS, colour, new_figure
@@ -22,42 +24,15 @@ The values are those of the noisy frames' selection and shifts applied to the no
 (``*_noiseless``): the noisy image's own Strehl is biased up at low signal, where a method that
 registers on the brightest noise speckle piles the noise peaks up on the axis."""
 
-I_ZERO_POINT_W_M2_UM = 1.13e-8
-"""I-band (0.80 um) flux density of magnitude 0 [W m^-2 um^-1] (Vega; Bessell, Castelli & Plez 1998,
-1.13e-9 erg s^-1 cm^-2 A^-1)."""
-I_WAVELENGTH_UM, I_BANDWIDTH_UM = 0.80, 0.30
-"""The band's centre and width [um]: a long-pass I (+ z) filter, as lucky cameras use."""
-THROUGHPUT = 0.5
-"""Atmosphere, telescope, instrument and detector quantum efficiency together."""
-FRAME_TIME_S = 0.01
-"""The lucky frame (100 Hz)."""
-TELESCOPE_AREA_M2 = np.pi / 4 * (4.2**2 - 1.2**2)
-"""The 4.2 m telescope's collecting area, less the 1.2 m central obscuration [m^2]."""
 
-
-def collecting_area_m2(diameter_m: float, obscuration_m: float) -> float:
-    """A telescope's collecting area, its central obscuration's taken away [m^2]."""
-    return np.pi / 4 * (diameter_m**2 - obscuration_m**2)
-
-
-def photons_at_zero_magnitude(area_m2: float = TELESCOPE_AREA_M2) -> float:
-    """Detected photons per frame of an I = 0 star: F_lambda dlambda A T t / (h c / lambda),
-    through a collecting area ``area_m2`` (default: the 4.2 m telescope's)."""
-    photon_energy_j = 6.62607015e-34 * 2.99792458e8 / (I_WAVELENGTH_UM * 1e-6)
-    power_w = I_ZERO_POINT_W_M2_UM * I_BANDWIDTH_UM * area_m2 * THROUGHPUT
-    return power_w * FRAME_TIME_S / photon_energy_j
-
-
-def i_magnitude(photons_per_frame, area_m2: float = TELESCOPE_AREA_M2):
-    """The I magnitude of a star giving ``photons_per_frame`` detected photons per frame
-    through ``area_m2`` (:func:`photons_at_zero_magnitude`; at 4.2 m 866 photons at I = 15, 55
-    at I = 18)."""
-    return 2.5 * np.log10(photons_at_zero_magnitude(area_m2) / np.asarray(photons_per_frame, dtype=float))
-
-
-def photons_per_frame(i_mag, area_m2: float = TELESCOPE_AREA_M2):
-    """The inverse of :func:`i_magnitude`."""
-    return photons_at_zero_magnitude(area_m2) * 10 ** (-0.4 * np.asarray(i_mag, dtype=float))
+def zero_magnitude_photons(settings: FigureSettings) -> np.ndarray:
+    """Per case of the figure, detected photons per frame of a magnitude-0 star through its
+    aperture in its frames (:meth:`luckyao.photometry.Photometry.photons_at_zero_magnitude`, the
+    figure's ``photometry``)."""
+    photometry = Photometry.from_config(settings.photometry)
+    return np.array(
+        [photometry.photons_at_zero_magnitude(*case_aperture(settings.case_configs[name])) for name in settings.cases]
+    )
 
 
 def registration_data(settings: FigureSettings, datasets) -> xr.Dataset:
@@ -74,12 +49,30 @@ def registration_data(settings: FigureSettings, datasets) -> xr.Dataset:
     ds = ds.assign_coords(registration=("registration", methods, {"long_name": "registration method"}))
     for metric in REGISTRATION_METRICS:
         ds[f"{metric}_knee_photons"] = knees(ds, metric)
+    photometry = Photometry.from_config(settings.photometry)
+    zero = zero_magnitude_photons(settings)
+    ds = ds.assign_coords(
+        zero_magnitude_photons_per_frame=(
+            "case",
+            zero,
+            {
+                "units": "1",
+                "long_name": f"detected photons per frame of a {photometry.band} = 0 star through the case's aperture "
+                "in its frames (luckyao.photometry; the magnitude axis and the knees' magnitudes)",
+            },
+        )
+    )
     ds.attrs.update(
-        i_zero_photons_per_frame=photons_at_zero_magnitude(),
-        i_zero_point_w_m2_um=I_ZERO_POINT_W_M2_UM,
-        i_bandwidth_um=I_BANDWIDTH_UM,
-        throughput=THROUGHPUT,
-        frame_time_s=FRAME_TIME_S,
+        i_zero_photons_per_frame=float(zero[0]),
+        i_zero_point_w_m2_um=photometry.zero_point_w_m2_um,
+        i_bandwidth_um=photometry.bandwidth_um,
+        throughput=photometry.throughput,
+        frame_time_s=case_aperture(settings.case_configs[settings.cases[0]])[1],
+        photometric_band=photometry.band,
+        photometric_wavelength_um=photometry.wavelength_um,
+        photometric_apertures=", ".join(
+            sorted({f"{settings.case(name).telescope.diameter_m:g} m" for name in settings.cases})
+        ),
     )
     return ds
 
@@ -124,13 +117,23 @@ def knees(ds: xr.Dataset, metric: str) -> xr.DataArray:
     )
 
 
+def zero_photons_of(ds: xr.Dataset, case) -> float:
+    """A registration figure's photons per frame at magnitude 0 for ``case`` (its
+    ``zero_magnitude_photons_per_frame``; a dataset drawn before it had one: ``i_zero_photons_per_frame``)."""
+    if "zero_magnitude_photons_per_frame" in ds.coords:
+        return float(ds.zero_magnitude_photons_per_frame.sel(case=case))
+    return float(ds.attrs["i_zero_photons_per_frame"])
+
+
 def knee_markdown(ds: xr.Dataset, fraction: float, criterion: str, read_noise: float) -> str:
     """The knees of a registration figure's dataset as a Markdown table: a row per case and method."""
+    band = ds.attrs.get("photometric_band", "I")
     lines = [
-        "| case | registration | Strehl knee [photons/frame] (I mag) | d50 knee [photons/frame] (I mag) |",
+        f"| case | registration | Strehl knee [photons/frame] ({band} mag) | d50 knee [photons/frame] ({band} mag) |",
         "|---|---|---|---|",
     ]
     for case in ds.case.values:
+        zero = zero_photons_of(ds, case)
         for method in ds.registration.values:
             cells = []
             for metric in REGISTRATION_METRICS:
@@ -143,7 +146,7 @@ def knee_markdown(ds: xr.Dataset, fraction: float, criterion: str, read_noise: f
                 cells.append(
                     "not reached"
                     if np.isnan(knee)
-                    else f"{at_most}{knee:.3g} (I {'≥ ' if at_most else ''}{i_magnitude(knee):.1f})"
+                    else f"{at_most}{knee:.3g} ({band} {'≥ ' if at_most else ''}{magnitude_of(knee, zero):.1f})"
                 )
             lines.append(f"| {ds.label.sel(case=case).values} | {method} | {cells[0]} | {cells[1]} |")
     return "\n".join(lines)
@@ -153,6 +156,7 @@ def draw_registration(ds: xr.Dataset, title: str):
     """Rows: metric; columns: case x read noise; colour and marker: registration method; line
     style: selection criterion; the first fraction of the figure; I magnitude on the top axis."""
     fraction = float(ds.fraction.values[0])
+    band = ds.attrs.get("photometric_band", "I")
     columns = [(case, read_noise) for case in ds.case.values for read_noise in ds.read_noise.values]
     n_rows, n_cols = len(REGISTRATION_METRICS), len(columns)
     fig = new_figure(3.4 * n_cols, 3.2 * n_rows + 1.6)
@@ -178,6 +182,19 @@ def draw_registration(ds: xr.Dataset, title: str):
                         ms=3,
                         label=f"{method}, by {CRITERIA.get(criterion, criterion)}",
                     )
+                    bound_flag = f"{metric}_noiseless_field_bound"
+                    if bound_flag in cell:  # a d50 set by the field: a lower bound, an open triangle
+                        bound = cell[bound_flag].values.astype(bool)
+                        values = cell[f"{metric}_noiseless"].values
+                        ax.plot(
+                            ds.signal.values[bound],
+                            values[bound],
+                            ls="none",
+                            marker="^",
+                            mfc="none",
+                            ms=7,
+                            color=colour(k),
+                        )
                     ax.axhline(
                         float(cell[f"{metric}_noiseless_detector"]),
                         color=colour(k),
@@ -199,12 +216,15 @@ def draw_registration(ds: xr.Dataset, title: str):
                 fontsize=9,
             )
             ax.grid(alpha=0.3)
-            top = ax.secondary_xaxis("top", functions=(i_magnitude, photons_per_frame))
-            magnitudes = i_magnitude(ds.signal.values[[-1, 0]])
+            zero = zero_photons_of(ds, case)
+            top = ax.secondary_xaxis(
+                "top", functions=(partial(magnitude_of, zero_photons=zero), partial(photons_of, zero_photons=zero))
+            )
+            magnitudes = magnitude_of(ds.signal.values[[-1, 0]], zero)
             top.set_xticks(np.arange(np.ceil(magnitudes[0]), np.floor(magnitudes[1]) + 1, 2))
             top.xaxis.set_major_formatter(FormatStrFormatter("%g"))
             top.xaxis.set_minor_formatter(NullFormatter())
-            top.set_xlabel("I magnitude" if row == 0 else "", fontsize=8)
+            top.set_xlabel(f"{band} magnitude" if row == 0 else "", fontsize=8)
     for ax in axes[-1]:
         ax.set_xlabel("detected photons per frame")
     fig.legend(
@@ -214,9 +234,11 @@ def draw_registration(ds: xr.Dataset, title: str):
         fontsize=8,
         title=f"{100 * fraction:g} % of frames, the noisy frames' selection and shifts scored on the noiseless "
         "frames; colour and marker: registration;\nline style: selection criterion; "
-        f"thin lines: noiseless detector.\nI magnitude: {ds.attrs['i_zero_photons_per_frame']:.3g} "
-        f"photons per frame at I = 0\n({ds.attrs['i_bandwidth_um'] * 1e3:g} nm band, throughput "
-        f"{ds.attrs['throughput']:g}, {ds.attrs['frame_time_s'] * 1e3:g} ms, 4.2 m)",
+        "thin lines: noiseless detector; open triangles: d50 set by the field (a lower bound).\n"
+        f"{band} magnitude: {ds.attrs['i_zero_photons_per_frame']:.3g} "
+        f"photons per frame at {band} = 0\n({ds.attrs['i_bandwidth_um'] * 1e3:g} nm band, throughput "
+        f"{ds.attrs['throughput']:g}, {ds.attrs['frame_time_s'] * 1e3:g} ms, "
+        f"{ds.attrs.get('photometric_apertures', '4.2 m')})",
         title_fontsize=8,
     )
     fig.suptitle(f"{title}: integrated-image quality vs signal per frame,\nby registration method")

@@ -118,6 +118,10 @@ class FigureSettings:
     sweep_detectors: dict = field(default_factory=dict)
     case_differences: dict = field(default_factory=dict)
     """``{case: {key path: value}}``: what each case sets apart from the base (not derived)."""
+    photometry: dict = field(default_factory=dict)
+    """The study's ``photometry`` block with its defaults (:func:`luckyao.photometry.config_with_defaults`):
+    the magnitude scale of the kinds that draw magnitudes (:data:`luckyao.studyspec.lucky.MAGNITUDE_KINDS`);
+    empty: the schema's defaults."""
 
     @classmethod
     def from_dict(cls, settings: dict) -> "FigureSettings":

@@ -5,7 +5,18 @@ import xarray as xr
 
 from ..lucky.dataset import NOISE_DOMINATED, noise_dominated, noise_flag_attrs
 from .settings import FigureSettings, case_coords
-from .style import AO_STYLE, CRITERIA, MARKERS, METRICS, SCREEN_INCHES, colour, new_figure, with_error
+from .style import (
+    AO_STYLE,
+    CRITERIA,
+    MARKERS,
+    METRICS,
+    SCREEN_INCHES,
+    colour,
+    limit_flags,
+    new_figure,
+    unflagged,
+    with_error,
+)
 
 
 def quality_vs_signal_data(settings: FigureSettings, datasets) -> xr.Dataset:
@@ -63,6 +74,8 @@ def signal_data(settings: FigureSettings, datasets) -> xr.Dataset:
         data[f"{metric}_noiseless"] = (dims, clean, dict(first[f"{metric}_noiseless"].attrs))
         flags = noise_dominated(data[metric][1], clean)
         data[f"{metric}_noise_dominated"] = (dims, flags.astype(np.int8), noise_flag_attrs(metric))
+    for name in limit_flags(datasets, metric) + limit_flags(datasets, f"{metric}_noiseless"):
+        data[name] = (dims, table(name), dict(first[name].attrs))
     noiseless = first.detector[np.isnan(first.photons_per_frame.values)].values
     if noiseless.size:
         reference = [
@@ -105,7 +118,6 @@ def draw_quality_vs_signal(ds: xr.Dataset, title: str):
     n_rows, n_cols = ds.sizes["registration"], len(columns)
     fig = new_figure(*SCREEN_INCHES)
     axes = fig.subplots(n_rows, n_cols, squeeze=False, sharex=True, sharey=True)
-    flag = f"{metric}_noise_dominated"
     for r, method in enumerate(ds.registration.values):
         for f, (read_noise, fraction) in enumerate(columns):
             ax = axes[r, f]
@@ -115,9 +127,7 @@ def draw_quality_vs_signal(ds: xr.Dataset, title: str):
                     cell = ds.sel(
                         case=case, criterion=criterion, fraction=fraction, read_noise=read_noise, registration=method
                     )
-                    y = cell[metric].values.astype(float)
-                    if flag in cell:
-                        y = np.where(cell[flag].values.astype(bool), np.nan, y)
+                    y = unflagged(cell, metric)
                     ax.plot(
                         ds.signal,
                         y,
@@ -157,8 +167,8 @@ def draw_quality_vs_signal(ds: xr.Dataset, title: str):
         title="rows: registration method; colour and marker: selection criterion; line style: case; thin "
         "horizontal lines: noiseless detector\n"
         f"bands: ±1 Monte-Carlo standard error; points more than {NOISE_DOMINATED:.0%} off the same "
-        "selection on the noiseless frames\nare noise-dominated and left out; values above the axis: blurred "
-        "by recentring on noise",
+        "selection on the noiseless frames\nare noise-dominated and left out, as are values beyond the "
+        "diffraction limit and d50 set by the field (bounds); values above the axis: blurred by recentring on noise",
         title_fontsize=8,
     )
     fig.suptitle(f"{title}: integrated-image {METRICS[metric]} vs signal per frame")

@@ -107,6 +107,28 @@ def with_error(datasets, metric: str) -> list[str]:
     return [metric] + ([f"{metric}_error"] if all(f"{metric}_error" in ds for ds in datasets) else [])
 
 
+def limit_flags(datasets, metric: str) -> list[str]:
+    """The flags of ``metric`` every case's lucky dataset has: beyond the diffraction limit, and a
+    d50 set by the field (:func:`luckyao.lucky.limits.add_limit_flags`)."""
+    names = [f"{metric}_beyond_diffraction_limit", f"{metric}_field_bound"]
+    return [name for name in names if all(name in ds for ds in datasets)]
+
+
+FLAG_SUFFIXES = ("_noise_dominated", "_beyond_diffraction_limit", "_field_bound")
+"""The flags that mask a value in a drawing: noise-dominated, beyond the diffraction limit, a d50
+set by the field (:mod:`luckyao.lucky.dataset`, :mod:`luckyao.lucky.limits`)."""
+
+
+def unflagged(values: xr.Dataset, name: str) -> np.ndarray:
+    """``values[name]`` as float, NaN where any of its flags (:data:`FLAG_SUFFIXES`) is set: what
+    a drawing shows."""
+    y = np.array(values[name].values, dtype=float)
+    for suffix in FLAG_SUFFIXES:
+        if f"{name}{suffix}" in values:
+            y = np.where(values[f"{name}{suffix}"].values.astype(bool), np.nan, y)
+    return y
+
+
 def series_fraction_lines(ax, x, ds, metric: str) -> None:
     """``ds[metric]`` (series, fraction) against ``x`` with its ``<metric>_error`` bars when
     present: a colour per series, a line style and marker per fraction."""

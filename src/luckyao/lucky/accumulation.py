@@ -214,6 +214,7 @@ class WholeFrames:
     def flux(items: np.ndarray) -> np.ndarray:
         return items.sum(axis=(-2, -1))
 
-    def score(self, images: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Strehl ratio, FWHM [arcsec] and d50 [arcsec] (about the centre of gravity) of images (..., n, n)."""
-        return score_images(images, self.peak, self.scale, self.encircled)
+    def score(self, images: np.ndarray, expected_flux: np.ndarray | None = None) -> tuple[np.ndarray, ...]:
+        """Strehl ratio, FWHM [arcsec] and d50 [arcsec] (about the centre of gravity) of images
+        (..., n, n); the Strehl over ``expected_flux`` (...) where not NaN (:func:`.metrics.strehl_flux`)."""
+        return score_images(images, self.peak, self.scale, self.encircled, expected_flux)

@@ -21,8 +21,9 @@ method. A sub-pixel method (:mod:`.registration`) instead adds one short vector 
 
 All three are linear in the frame, so the sum of the vectors of a set of frames is the vector
 of their integrated image, which :meth:`CroppedFrames.score` scores: Strehl from the crop's
-brightest pixel over ``P_dl F`` (:func:`.metrics.strehl_from`, ``F`` the whole frames' flux; the
-stacked image peaks at the axis, inside the crop), FWHM from the crop
+brightest pixel over ``P_dl F`` (:func:`.metrics.strehl_from`, ``F`` the whole frames' flux, or a
+noisy detector's expected flux, :func:`.metrics.strehl_flux`; the stacked image peaks at the axis,
+inside the crop), FWHM from the crop
 (:func:`.metrics.fwhm_arcsec`), d50 from the energies (about the axis, where the method stacks
 the frames; ``cog``'s whole-frame d50 is about the integrated image's centre of gravity). A
 vector is ~1/8 of a 256 x 256 frame at the default crop (:data:`CROP_ARCSEC`), and a crop's
@@ -37,7 +38,7 @@ import numpy as np
 
 from . import adds, image_helpers
 from .accumulation import axis_window
-from .metrics import EncircledEnergy, d50_from_radius, fwhm_arcsec, strehl_from
+from .metrics import EncircledEnergy, d50_from_radius, fwhm_arcsec, strehl_flux, strehl_from
 from .registration import fourier_shift
 
 CROP_ARCSEC = 1.25
@@ -152,11 +153,12 @@ class CroppedFrames:
         """The flux (...) of vectors (..., item)."""
         return vectors[..., -1]
 
-    def score(self, vectors: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def score(self, vectors: np.ndarray, expected_flux: np.ndarray | None = None) -> tuple[np.ndarray, ...]:
         """Strehl ratio, FWHM [arcsec] and d50 [arcsec] (...) of the images of vectors (..., item)
-        (module docstring)."""
+        (module docstring); the Strehl over ``expected_flux`` (...) where not NaN
+        (:func:`.metrics.strehl_flux`)."""
         c2, n_bins = self.crop_px**2, self.encircled.n_bins
         images, flux = self.images(vectors), self.flux(vectors)
-        strehl = strehl_from(images.max(axis=(-2, -1)), flux, self.diffraction_limited_peak)
+        strehl = strehl_from(images.max(axis=(-2, -1)), strehl_flux(flux, expected_flux), self.diffraction_limited_peak)
         radius = self.encircled.radius_px_of(self.encircled.energies_of(vectors[..., c2 : c2 + n_bins]), flux)
         return strehl, fwhm_arcsec(images, self.pixel_scale_arcsec), d50_from_radius(radius, self.pixel_scale_arcsec)

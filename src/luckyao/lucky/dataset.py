@@ -14,6 +14,13 @@ NOISE_METRICS = ("strehl", "fwhm_arcsec", "d50_arcsec")
 """The integrated image's metrics flagged ``<metric>_noise_dominated`` (:func:`add_noise_flags`)."""
 
 
+MEASURED = (
+    "(a noisy detector's: what a pipeline measures, a Strehl ratio over the frames' expected flux, N photons "
+    "a frame; the noiseless detector's: the ideal camera's)"
+)
+"""What a noisy detector's values are, said in their ``long_name``."""
+
+
 def _attrs(units: str, long_name: str) -> dict:
     return {"units": units, "long_name": long_name}
 
@@ -127,10 +134,18 @@ def result_dataset(
     }
     sel = ("criterion", "fraction", "detector")
     data = {
-        "strehl": (sel, s_int, _attrs("1", "Strehl ratio of the integrated image")),
-        "fwhm_arcsec": (sel, fwhm_int, _attrs("arcsec", "FWHM of the integrated image")),
-        "d50_arcsec": (sel, d50_int, _attrs("arcsec", "diameter enclosing 50% of the energy of the integrated image")),
-        "long_exposure_strehl": (("recentring", "detector"), s_long, _attrs("1", "Strehl ratio of the long exposure")),
+        "strehl": (sel, s_int, _attrs("1", f"Strehl ratio of the integrated image {MEASURED}")),
+        "fwhm_arcsec": (sel, fwhm_int, _attrs("arcsec", f"FWHM of the integrated image {MEASURED}")),
+        "d50_arcsec": (
+            sel,
+            d50_int,
+            _attrs("arcsec", f"diameter enclosing 50% of the energy of the integrated image {MEASURED}"),
+        ),
+        "long_exposure_strehl": (
+            ("recentring", "detector"),
+            s_long,
+            _attrs("1", f"Strehl ratio of the long exposure {MEASURED}"),
+        ),
         "long_exposure_fwhm_arcsec": (
             ("recentring", "detector"),
             fwhm_long,
@@ -141,7 +156,11 @@ def result_dataset(
             d50_long,
             _attrs("arcsec", "diameter enclosing 50% of the energy of the long exposure"),
         ),
-        "frame_strehl": (("detector", "frame"), frame_strehl, _attrs("1", "Strehl ratio of the detected frame")),
+        "frame_strehl": (
+            ("detector", "frame"),
+            frame_strehl,
+            _attrs("1", f"Strehl ratio of the detected frame {MEASURED}"),
+        ),
         "frame_d50_arcsec": (
             ("detector", "frame"),
             frame_d50_arcsec,
@@ -163,7 +182,10 @@ def result_dataset(
 
 def add_noiseless_scores(ds: xr.Dataset, s_nl, fwhm_nl, d50_nl) -> None:
     """The scores of the same selection and shifts applied to the noiseless frames."""
-    same = "of the integrated image of the same selection and shifts applied to the noiseless frames"
+    same = (
+        "of the integrated image of the same selection and shifts applied to the noiseless frames (the "
+        "simulation's yardstick: no pipeline has them)"
+    )
     sel = ("criterion", "fraction", "detector")
     ds["strehl_noiseless"] = (sel, s_nl, _attrs("1", f"Strehl ratio {same}"))
     ds["fwhm_arcsec_noiseless"] = (sel, fwhm_nl, _attrs("arcsec", f"FWHM {same}"))

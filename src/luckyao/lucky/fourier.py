@@ -26,6 +26,8 @@ kept count is checked to be ``n_f``.
 
 Scores (:meth:`FourierSelection.scores`): the Strehl ratio is the image's peak over ``P_dl F``, ``F`` the
 mean whole-frame flux of the frames kept at the zero frequency (the crop's flux is not the image's);
+a noisy detector's Strehl is over their mean *expected* flux instead, as shift-and-add's
+(:func:`.metrics.strehl_flux`: read noise can drive the measured one to zero);
 the FWHM is :func:`.metrics.fwhm_arcsec`'s of the image; the d50 is from the image's encircled energy
 about the axis pixel (where the frames are stacked; :class:`.metrics.EncircledEnergy` of the crop,
 periodic over it) over ``F``; where the disc inscribed in the crop holds less than half of ``F``, the
@@ -46,7 +48,7 @@ import scipy.fft
 import xarray as xr
 
 from . import image_helpers
-from .metrics import EncircledEnergy, d50_from_radius, fwhm_arcsec, strehl_from
+from .metrics import EncircledEnergy, d50_from_radius, fwhm_arcsec, strehl_flux, strehl_from
 from .ranking import fraction_counts
 
 
@@ -153,13 +155,14 @@ class FourierSelection:
         # (detected, noiseless): the kept complex values' sums, and the whole-frame flux kept at q = 0
         self.sums = np.zeros((2, n_det, n_fr, n_freq), np.complex128)
         self.flux = np.zeros((2, n_det, n_fr))
+        self.expected = np.full((n_det, n_fr), np.nan)  # the detected frames' expected flux kept (noisy)
         self.taken = np.zeros((n_det, n_fr, n_freq), np.int64)  # ties kept so far
         self.kept = np.zeros((n_det, n_fr, n_freq), np.int64)  # frames kept so far (checked: the count)
 
-    def observe(self, i: int, crops: np.ndarray) -> None:
-        """Pass 1: detector ``i``'s registered crops (k, c, c) of the next frames, their amplitudes streamed."""
+    def observe(self, i: int, amp: np.ndarray) -> None:
+        """Pass 1: detector ``i``'s amplitudes (k, n_freq) (:func:`amplitudes`) of the next frames, streamed."""
         if self.top is not None:
-            self.top[i].add(amplitudes(spectra_of(crops)))
+            self.top[i].add(amp)
 
     def rank(self) -> None:
         """After pass 1: each detector's thresholds and ties per selecting fraction and frequency."""
@@ -186,24 +189,31 @@ class FourierSelection:
         self.kept[i] += out.sum(axis=1)
         return out
 
-    def add(self, i: int, crops: np.ndarray, flux: np.ndarray, clean_crops=None, clean_flux=None) -> None:
-        """Pass 2: detector ``i``'s registered crops (k, c, c) of the next frames, of whole-frame
-        ``flux`` (k,), into their sums where kept; ``clean_crops`` and ``clean_flux``: the noiseless
-        frames with the same shifts (a noisy detector), into the noiseless sums with the same selection."""
-        spectra = spectra_of(crops).reshape(len(crops), -1)
-        keep = self.masks(i, amplitudes(spectra.reshape(len(crops), *self.half)))
+    def add(
+        self, i: int, spectra: np.ndarray, amp: np.ndarray, flux: np.ndarray, clean=None, clean_flux=None, expected=None
+    ) -> None:
+        """Pass 2: detector ``i``'s spectra (k, n_freq) of the registered crops of the next frames, their
+        amplitudes ``amp`` (k, n_freq) and whole-frame ``flux`` (k,), into their sums where kept;
+        ``clean``, ``clean_flux`` and ``expected``: the noiseless frames' spectra with the same shifts (a
+        noisy detector), into the noiseless sums with the same selection, and the detected frames'
+        expected flux (k,) (:func:`.metrics.strehl_flux`)."""
+        keep = self.masks(i, amp)
         self._add(0, i, keep, spectra, flux)
-        if clean_crops is not None:
-            self._add(1, i, keep, spectra_of(clean_crops).reshape(len(crops), -1), clean_flux)
+        if clean is not None:
+            self._add(1, i, keep, clean, clean_flux)
+        if expected is not None:
+            kept = np.array([expected[mask[:, 0]].sum() for mask in keep])
+            self.expected[i] = np.where(np.isnan(self.expected[i]), 0.0, self.expected[i]) + kept
 
     def _add(self, which: int, i: int, keep: np.ndarray, spectra: np.ndarray, flux: np.ndarray) -> None:
         for j, mask in enumerate(keep):
             self.sums[which, i, j] += np.where(mask, spectra, 0).sum(axis=0)
             self.flux[which, i, j] += flux[mask[:, 0]].sum()
 
-    def images(self, noiseless_detectors) -> tuple[np.ndarray, np.ndarray]:
-        """The integrated images (2, det, fractions, c, c) (detected, noiseless) and their fluxes
-        ``F`` (2, det, fractions); a noiseless detector's noiseless ones its own. Checks that every
+    def images(self, noiseless_detectors) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The integrated images (2, det, fractions, c, c) (detected, noiseless), their fluxes
+        ``F`` (2, det, fractions) and the detected images' expected fluxes (det, fractions; NaN for a
+        noiseless detector); a noiseless detector's noiseless ones its own. Checks that every
         frequency kept ``n_f`` frames."""
         if not (self.kept == self.counts[None, :, None]).all():
             raise RuntimeError("Fourier selection: a frequency kept another count of frames than its fraction's")
@@ -212,12 +222,15 @@ class FourierSelection:
                 self.sums[1, i], self.flux[1, i] = self.sums[0, i], self.flux[0, i]
         n = self.counts[None, None, :]
         mean = self.sums.reshape(*self.sums.shape[:3], *self.half) / n[..., None, None]
-        return scipy.fft.irfft2(mean, s=(self.crop_px, self.crop_px)), self.flux / n
+        return scipy.fft.irfft2(mean, s=(self.crop_px, self.crop_px)), self.flux / n, self.expected / n[0]
 
-    def scores(self, images: np.ndarray, flux: np.ndarray, peak: float, scale: float) -> tuple[np.ndarray, ...]:
+    def scores(
+        self, images: np.ndarray, flux: np.ndarray, peak: float, scale: float, strehl_over=None
+    ) -> tuple[np.ndarray, ...]:
         """Strehl ratio, FWHM [arcsec], d50 [arcsec] and where the d50 is beyond the crop (a lower
         bound, bool) (...) of images (..., c, c) of fluxes ``F`` (...) (module docstring; ``peak``: the
-        unit-flux diffraction-limited peak, ``scale`` [arcsec/pixel])."""
+        unit-flux diffraction-limited peak, ``scale`` [arcsec/pixel]); ``strehl_over`` (...): the
+        Strehl's flux where not NaN (:func:`.metrics.strehl_flux`; default ``F``)."""
         c = self.crop_px
         flat = images.reshape(-1, c, c)
         encircled = EncircledEnergy(c)
@@ -225,21 +238,84 @@ class FourierSelection:
         radius = encircled.radius_px_of(encircled.energies_binned(flat, centres), flux.reshape(-1))
         radius = radius.reshape(images.shape[:-2])
         beyond = np.isnan(radius) & (flux > 0)
+        over = flux if strehl_over is None else strehl_flux(flux, strehl_over)
         return (
-            strehl_from(images.max(axis=(-2, -1)), flux, peak),
+            strehl_from(images.max(axis=(-2, -1)), over, peak),
             fwhm_arcsec(images, scale),
             d50_from_radius(np.where(beyond, c / 2, radius), scale),
             beyond,
         )
 
 
-def add_fourier(ds: xr.Dataset, selection: FourierSelection, detectors, peak: float, scale: float, images: bool):
+class FourierRun:
+    """A registration method's Fourier lucky imaging over the whole run and over each of ``n_blocks``
+    time blocks, each block selected on its own (frame ``f`` in block ``f // (n_frames // n_blocks)``,
+    the remainder in none, as :class:`.accumulation.TimeBlocks`): its Monte-Carlo errors are the
+    blocks' batch means, as shift-and-add's. Each frame's crop is transformed once for all."""
+
+    def __init__(self, n_det: int, n_frames: int, fractions, crop_px: int, chunk_frames: int, n_blocks: int):
+        self.crop_px = crop_px
+        self.whole = FourierSelection(n_det, n_frames, fractions, crop_px, chunk_frames)
+        self.block_frames = n_frames // n_blocks if n_blocks else 0
+        self.blocks = [
+            FourierSelection(n_det, self.block_frames, fractions, crop_px, chunk_frames) for _ in range(n_blocks)
+        ]
+
+    def _parts(self, start: int, k: int):
+        """(selection, the chunk's frames in it) of the chunk of frames ``start..start + k - 1``."""
+        yield self.whole, slice(0, k)
+        size = self.block_frames
+        for b in range(start // max(size, 1), min((start + k - 1) // max(size, 1) + 1, len(self.blocks))):
+            yield self.blocks[b], slice(max(b * size, start) - start, min((b + 1) * size, start + k) - start)
+
+    def observe(self, i: int, crops: np.ndarray, start: int) -> None:
+        """Pass 1: detector ``i``'s registered crops (k, c, c) of frames ``start..``, their amplitudes streamed."""
+        amp = amplitudes(spectra_of(crops))
+        for selection, part in self._parts(start, len(crops)):
+            selection.observe(i, amp[part])
+
+    def rank(self) -> None:
+        """After pass 1: every selection's thresholds."""
+        for selection in (self.whole, *self.blocks):
+            selection.rank()
+
+    def add(
+        self, i: int, crops: np.ndarray, flux: np.ndarray, start: int, clean_crops=None, clean_flux=None, expected=None
+    ) -> None:
+        """Pass 2: :meth:`FourierSelection.add` of detector ``i``'s registered crops (k, c, c) of frames
+        ``start..`` (and of their noiseless ``clean_crops``), into the whole run's and their blocks' sums."""
+        spectra = spectra_of(crops)
+        amp = amplitudes(spectra)
+        spectra = spectra.reshape(len(crops), -1)
+        clean = None if clean_crops is None else spectra_of(clean_crops).reshape(len(crops), -1)
+        for selection, p in self._parts(start, len(crops)):
+            selection.add(
+                i,
+                spectra[p],
+                amp[p],
+                flux[p],
+                None if clean is None else clean[p],
+                None if clean_flux is None else clean_flux[p],
+                None if expected is None else expected[p],
+            )
+
+
+def _scored(selection: FourierSelection, detectors, peak: float, scale: float):
+    """A selection's integrated images (2, det, fraction, c, c), fluxes and scores (each (2, det, fraction))."""
+    integrated, flux, expected = selection.images([d.noiseless for d in detectors])
+    over = np.stack([expected, np.full_like(expected, np.nan)])  # the noiseless sums: their own flux
+    return integrated, flux, selection.scores(integrated, flux, peak, scale, over)
+
+
+def add_fourier(ds: xr.Dataset, run: FourierRun, detectors, peak: float, scale: float, images: bool):
     """``ds`` with the Fourier lucky images' scores ``fourier_strehl``, ``fourier_fwhm_arcsec``,
     ``fourier_d50_arcsec`` (fourier_fraction, detector), the same of the noiseless frames with the
-    same selection (``*_noiseless``) and, with ``images``, ``fourier_image`` (fourier_fraction,
+    same selection (``*_noiseless``), their Monte-Carlo errors from the time blocks (``*_error``)
+    and, with ``images``, ``fourier_image`` (fourier_fraction,
     detector, y, x) over ``F`` (float32; ``ds``'s y and x, the same crop)."""
-    integrated, flux = selection.images([d.noiseless for d in detectors])
-    scored = selection.scores(integrated, flux, peak, scale)  # each (2, det, fraction)
+    selection = run.whole
+    integrated, flux, scored = _scored(selection, detectors, peak, scale)  # scores each (2, det, fraction)
+    blocks = [_scored(block, detectors, peak, scale)[2] for block in run.blocks]
     dims = ("fourier_fraction", "detector")
     ds = ds.assign_coords(
         fourier_fraction=(
@@ -263,6 +339,19 @@ def add_fourier(ds: xr.Dataset, selection: FourierSelection, detectors, peak: fl
         values = scored[("strehl", "fwhm_arcsec", "d50_arcsec").index(metric)]
         ds[f"fourier_{metric}"] = (dims, values[0].T, {"units": units, "long_name": f"{name} of {of}"})
         ds[f"fourier_{metric}_noiseless"] = (dims, values[1].T, {"units": units, "long_name": f"{name} {same}"})
+        if len(blocks) > 1:
+            per_block = np.stack([b[("strehl", "fwhm_arcsec", "d50_arcsec").index(metric)] for b in blocks])
+            error = per_block.std(axis=0, ddof=1) / np.sqrt(len(blocks))  # (2, det, fraction)
+            for suffix, e in zip(("", "_noiseless"), error):
+                ds[f"fourier_{metric}{suffix}_error"] = (
+                    dims,
+                    e.T,
+                    {
+                        "units": units,
+                        "long_name": f"Monte-Carlo standard error of fourier_{metric}{suffix}, from {len(blocks)} "
+                        f"time blocks of {run.block_frames} frames each selected on its own (batch means)",
+                    },
+                )
     for suffix, beyond in zip(("", "_noiseless"), scored[3]):
         ds[f"fourier_d50_beyond_crop{suffix}"] = (
             dims,

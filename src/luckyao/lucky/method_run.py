@@ -27,12 +27,12 @@ from .dataset import (
     result_dataset,
 )
 from .detector import Detector
-from .fourier import FourierSelection, add_fourier, registered_crops
+from .fourier import FourierRun, add_fourier, registered_crops
 from .guesses import GuessedBins
-from .metrics import d50_from_radius, score_images
+from .metrics import d50_from_radius, score_images, strehl_flux
 from .ranking import criterion_bins
 from .registration import FrameSpectra, Registration, shifts_of
-from .scoring import score_partial_sums, value_at_peak
+from .scoring import expected_fluxes, score_partial_sums, value_at_peak
 
 
 class FrameValues:
@@ -176,7 +176,9 @@ class MethodRun:
             self.buffer = np.empty((2, chunk_frames, *self.accumulation.item_shape))
         if run.fourier_fractions is not None:
             size = min(run.fourier_crop_px(n_pixels), getattr(self.accumulation, "crop_px", n_pixels))
-            self.fourier = FourierSelection(len(run.detectors), run.n_frames, run.fourier_fractions, size, chunk_frames)
+            self.fourier = FourierRun(
+                len(run.detectors), run.n_frames, run.fourier_fractions, size, chunk_frames, run.n_blocks
+            )
 
     def _crops(self, frames: np.ndarray, i: int, sl: slice) -> np.ndarray:
         """Detector ``i``'s frames ``sl`` (k, n, n) registered, their central crop of the Fourier lucky imaging."""
@@ -191,11 +193,19 @@ class MethodRun:
             return
         flux = self.frames.flux[i, sl]
         if detected is None:
-            self.fourier.add(i, self._crops(unit.frames, i, sl), flux)
+            self.fourier.add(i, self._crops(unit.frames, i, sl), flux, sl.start)
             return
         if not np.array_equal(detected_rows.sum(axis=1), flux):
             raise RuntimeError(f"frames {sl.start}.. differ between the two passes")
-        self.fourier.add(i, self._crops(detected.frames, i, sl), flux, self._crops(unit.frames, i, sl), unit.flux())
+        self.fourier.add(
+            i,
+            self._crops(detected.frames, i, sl),
+            flux,
+            sl.start,
+            self._crops(unit.frames, i, sl),
+            unit.flux(),
+            self.run.flux_estimate[i, sl],
+        )
 
     def _prepared(
         self, spectra: FrameSpectra, i: int, sl: slice, flux: np.ndarray, energies=None, which=None, slot: int = 0
@@ -225,7 +235,7 @@ class MethodRun:
         k = sl.stop - sl.start
         frames.record(i, sl, measures)
         if self.fourier is not None:
-            self.fourier.observe(i, self._crops(detected.frames, i, sl))
+            self.fourier.observe(i, self._crops(detected.frames, i, sl), sl.start)
         shifts, add = frames.shifts[i, sl], self.accumulation.add
         radial_sums = measures[5] if len(measures) > 5 else None
         prepared = self._prepared(detected, i, sl, frames.flux[i, sl], radial_sums)
@@ -344,9 +354,22 @@ class MethodRun:
         """Score the rows of criteria ``crits`` (contiguous) of every block the chunk ``sl`` completes."""
         blocks = self.blocks
         for block, rows in self.sums.completed_blocks(sl, crits):
-            _, *scores = score_partial_sums(rows, len(crits), blocks.n_bins, blocks.last_bin, self.accumulation.score)
+            in_block = slice(block * blocks.block_frames, (block + 1) * blocks.block_frames)
+            expected = self._expected(blocks.bins[:, crits[0] : crits[-1] + 1, in_block], blocks.last_bin, in_block)
+            _, *scores = score_partial_sums(
+                rows, len(crits), blocks.n_bins, blocks.last_bin, self.accumulation.score, expected
+            )
             for values, score in zip(blocks.values, scores):
                 values[block, crits[0] : crits[-1] + 1] = score
+
+    def _expected(self, bins: np.ndarray, last_bin: np.ndarray, frames: slice = slice(None)) -> np.ndarray | None:
+        """The expected flux (criterion, fraction, det) of the integrated images of the frames
+        ``frames`` in ``bins`` (det, criterion, frames) (:func:`.scoring.expected_fluxes`), their
+        Strehl's flux; None with noiseless detectors only (every Strehl over its measured flux)."""
+        estimate = self.run.flux_estimate[:, frames]
+        if np.isnan(estimate).all():
+            return None
+        return expected_fluxes(estimate, bins, last_bin)
 
     def score(self, long_none: np.ndarray, image_crop_px: int | None) -> xr.Dataset:
         """Score the integrated images (cumulative sums of bins) and the long exposures (``long_none``,
@@ -356,27 +379,39 @@ class MethodRun:
         lc = sums.long_exposure_row
         long_registered = sums.detected[:, lc]
         frame_recentred_strehl = value_at_peak(
-            frames.in_window, accumulation.window, accumulation.images(long_registered), frames.flux, run.peak
+            frames.in_window,
+            accumulation.window,
+            accumulation.images(long_registered),
+            strehl_flux(frames.flux, run.flux_estimate),
+            run.peak,
         )
         scoring = (n_crit, sums.n_bins, sums.last_bin, accumulation.score)
+        long_expected = run.flux_estimate.sum(axis=1)  # (det,): every frame; NaN for a noiseless detector
         for i, detector in enumerate(run.detectors):
             if detector.noiseless:
                 sums.noiseless[i] = sums.detected[i, :lc]
         noiseless_scores = score_partial_sums(sums.noiseless, *scoring)[1:]
         sums.noiseless = sums.noiseless_rows = None
+        long_expected = None if np.isnan(long_expected).all() else long_expected  # noiseless only: measured
         if isinstance(accumulation, WholeFrames):  # both long exposures whole: scored together
             long_images = np.stack([long_none, long_registered])  # (recentring, det, n, n)
-            long_scores, long_flux = accumulation.score(long_images), None
+            long_scores = accumulation.score(
+                long_images, None if long_expected is None else np.stack([long_expected] * 2)
+            )
+            long_flux = None
         else:
             long_images = [long_none, accumulation.images(long_registered).copy()]
             long_flux = [None, accumulation.flux(long_registered).copy()]
             long_scores = [
                 np.stack(pair)
                 for pair in zip(
-                    score_images(long_none, run.peak, run.scale, run.encircled), accumulation.score(long_registered)
+                    score_images(long_none, run.peak, run.scale, run.encircled, long_expected),
+                    accumulation.score(long_registered, long_expected),
                 )
             ]
-        integrated, *run_scores = score_partial_sums(sums.detected[:, :lc], *scoring)
+        integrated, *run_scores = score_partial_sums(
+            sums.detected[:, :lc], *scoring, self._expected(self.bins, sums.last_bin)
+        )
         sums.detected = sums.detected_rows = long_registered = None
         ds = result_dataset(
             run.detectors,

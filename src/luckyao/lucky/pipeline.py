@@ -49,6 +49,12 @@ registered frame's crop amplitudes per detector and method, pass 2 draws every n
 (not only those guessed wrong) and adds each frame's complex values where the threshold keeps them;
 the other sums receive the same operations as without it.
 
+A noisy detector's Strehl ratios (a frame's, its criterion; an integrated image's; a time
+block's; the long exposures') are over the frames' expected flux, ``N`` times the noiseless
+frame's flux summed over the frames an image adds up (:func:`.metrics.strehl_flux`,
+:func:`.scoring.expected_fluxes`), not over the image's noisy sum, which read noise drives to
+zero at a few photons a frame; a noiseless detector's over its own flux.
+
 Alongside, the noiseless frames (the input, as float32) get the same detector's shifts
 and the same bins into a second set of partial sums: the ``*_noiseless`` scores separate a
 wrong selection or recentring from the noise in the final image. The sums are float64
@@ -148,6 +154,8 @@ def run_lucky(
     count ``unregistered_frames`` (detector)) and, for every method but ``cog``, a frame's d50
     is about its registered position. With ``matched_strehl`` (:class:`.scoring.MatchedStrehl`),
     a frame's Strehl (its criterion) is that of its matched-filtered peak, not of its brightest pixel.
+    A noisy detector's every Strehl ratio is over the frames' expected flux (``photons_per_frame``
+    times the noiseless frames' flux; module docstring).
     ``crop_px``: a sub-pixel method's crop (:mod:`.cropped`; default :func:`.cropped.crop_px`, 1.25").
     ``fourier_fractions``: Fourier lucky imaging too (:func:`run_lucky_methods`).
 
@@ -311,6 +319,9 @@ class _LuckyRun:
         self.guessing = any(m.guessing for m in self.methods)  # the same for every method
         self.noise = _ChunkNoise(detectors)
         self.long_none = self.encircled = self.clean = None
+        # a noisy detector's frames' expected flux, N times the noiseless frame's (the Strehl's
+        # flux, :func:`.metrics.strehl_flux`); NaN for a noiseless detector: its measured flux
+        self.flux_estimate = np.full((len(detectors), n_frames), np.nan)
         # the spectra of a detector's frames and of the noiseless ones, each made once per chunk and shared
         self.detected, self.unit = FrameSpectra(), FrameSpectra()
 
@@ -330,16 +341,19 @@ class _LuckyRun:
             yield slice(start, start + k), unit
             progress.update(start + k)
 
-    def common_measures(self, spectra: FrameSpectra, rows, cols, peak) -> tuple[np.ndarray, ...]:
+    def common_measures(self, spectra: FrameSpectra, rows, cols, peak, expected=None) -> tuple[np.ndarray, ...]:
         """Flux, centre of gravity and Strehl (of the brightest pixel, or matched-filtered) of the
-        frames (k, n, n) of ``spectra`` from their row and column sums and peaks: the same for every method."""
+        frames (k, n, n) of ``spectra`` from their row and column sums and peaks: the same for every
+        method. The Strehl is over the frames' ``expected`` flux (k,) if given (a noisy detector's:
+        :func:`.metrics.strehl_flux`), else over their measured flux."""
         flux = rows.sum(axis=1)
         if self.methods[0].frames.reference is not None:
             return flux, None, None
         centroids = centroid_from_sums(rows, cols, flux)
+        over = flux if expected is None else expected
         if self.matched_strehl is not None:
-            return flux, centroids, self.matched_strehl(spectra.frames, flux, spectra)
-        return flux, centroids, strehl_from(peak, flux, self.peak)
+            return flux, centroids, self.matched_strehl(spectra.frames, over, spectra)
+        return flux, centroids, strehl_from(peak, over, self.peak)
 
     def measures(self, spectra: FrameSpectra, common: tuple[np.ndarray, ...]) -> list[tuple[np.ndarray, ...]]:
         """Every method's measures (:meth:`.MethodRun.measures`) of the frames of ``spectra`` whose
@@ -394,7 +408,8 @@ class _LuckyRun:
                 if not detector.noiseless:
                     detected, rows, cols, peak = chunk.detect(detector, self.seed, sl.start, self.noise.buffer)
                     spectra = self.detected.reset(detected)
-                    common = self.common_measures(spectra, rows, cols, peak)
+                    self.flux_estimate[i, sl] = detector.photons_per_frame * spectra_unit.flux()
+                    common = self.common_measures(spectra, rows, cols, peak, self.flux_estimate[i, sl])
                     measures = self.measures(spectra, common)
                 elif self.clean is not None:  # measured in pass 0
                     spectra = spectra_unit

@@ -70,14 +70,38 @@ def integrated_images(partial: np.ndarray, n_crit: int, n_bins: int, last_bin: n
 
 
 def score_partial_sums(
-    partial: np.ndarray, n_crit: int, n_bins: int, last_bin: np.ndarray, score: Callable
+    partial: np.ndarray,
+    n_crit: int,
+    n_bins: int,
+    last_bin: np.ndarray,
+    score: Callable,
+    expected_flux: np.ndarray | None = None,
 ) -> tuple[np.ndarray, ...]:
     """The :func:`integrated_images` of partial sums (``partial`` is overwritten) and their
     Strehl, FWHM [arcsec] and d50 [arcsec] (criterion, fraction, det) by ``score`` (the
-    accumulation's: :class:`.accumulation.WholeFrames`, :class:`.cropped.CroppedFrames`).
+    accumulation's: :class:`.accumulation.WholeFrames`, :class:`.cropped.CroppedFrames`), the
+    Strehl over ``expected_flux`` (criterion, fraction, det) where not NaN (:func:`expected_fluxes`).
     One code path for the noisy and the noiseless sums, so equal sums give bit-identical scores."""
     images = integrated_images(partial, n_crit, n_bins, last_bin)
-    return (images, *score(images))
+    return (images, *(score(images) if expected_flux is None else score(images, expected_flux)))
+
+
+def expected_fluxes(flux_estimate: np.ndarray, bins: np.ndarray, last_bin: np.ndarray) -> np.ndarray:
+    """The expected flux (criterion, fraction, det) of each integrated image: the sum of its
+    frames' ``flux_estimate`` (det, frame) (:func:`.metrics.strehl_flux`; NaN for a noiseless
+    detector, whose rows stay NaN), the frames of ``bins`` (det, criterion, frame) ``0..last_bin[k]``
+    for fraction ``k`` (:func:`.ranking.selection_bins`)."""
+    n_det, n_crit, _ = bins.shape
+    n_bins = int(np.max(last_bin)) + 1
+    out = np.full((n_crit, len(last_bin), n_det), np.nan)
+    for i in range(n_det):
+        if np.isnan(flux_estimate[i]).all():
+            continue
+        for c in range(n_crit):
+            selected = bins[i, c] >= 0
+            per_bin = np.bincount(bins[i, c][selected], weights=flux_estimate[i][selected], minlength=n_bins)
+            out[c, :, i] = np.cumsum(per_bin)[last_bin]
+    return out
 
 
 def value_at_peak(
@@ -89,9 +113,10 @@ def value_at_peak(
 ) -> np.ndarray:
     """Per detector and frame, ``frame[p] / (flux P_dl)`` at the brightest pixel ``p`` of
     the long exposure (``long_images`` (det, n, n)) among the pixels ``window`` (flat
-    indices, around the axis), from the frames' values there (``frame_window``). When
-    ``p`` is the long exposure's peak and the fluxes are equal, their mean is its
-    Strehl (:func:`.metrics.strehl`)."""
+    indices, around the axis), from the frames' values there (``frame_window``); ``frame_flux``
+    (det, frame): the frames' Strehl fluxes (:func:`.metrics.strehl_flux`). When ``p`` is the
+    long exposure's peak and the fluxes are equal (or the long exposure's is their sum), their
+    mean is its Strehl (:func:`.metrics.strehl`)."""
     out = np.empty(frame_flux.shape)
     for i, image in enumerate(long_images):
         k = np.argmax(image.ravel()[window])

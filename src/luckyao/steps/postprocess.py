@@ -16,6 +16,7 @@ import xarray as xr
 from ..io.datasets import iter_frame_blocks, open_dataset, provenance, require_finite_lucky, write_dataset
 from ..lucky.accumulation import batch_mean_error
 from ..lucky.dataset import add_noise_flags
+from ..lucky.limits import add_limit_flags
 from ..lucky.pipeline import ImageReference, run_lucky_methods
 from ..lucky.ranking import ExternalCriterion
 from ..seeds import target_seed
@@ -154,6 +155,9 @@ def lucky_case(
         arguments = _lucky_arguments(settings, telemetry, science, peak)
         ds = ds.merge(stars_dataset(settings, telemetry, per_target, frames_of, arguments))
     add_noise_flags(ds)  # where a noisy detector's scores are noise-dominated
+    fwhm_dl, d50_dl = settings.diffraction_limited_scores()
+    ds.attrs.update(diffraction_limited_fwhm_arcsec=fwhm_dl, diffraction_limited_d50_arcsec=d50_dl)
+    add_limit_flags(ds)  # values beyond the diffraction limit, d50 set by the field
     # computed in the settings' order (names as text: a detector's last bits depend on its place
     # in the stacks the BLAS products score), stored by signal
     ds = ds.sel(detector=by_signal(settings_config["detectors"]))

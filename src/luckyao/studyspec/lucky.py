@@ -9,6 +9,10 @@ SIGNAL_KINDS = ("quality_vs_signal", "registration", "limiting_magnitude", "more
 """The figure kinds drawn against the detector sweep: each case they draw must be one of
 ``lucky.detector_sweep.cases`` (``study.validate_study``)."""
 
+MAGNITUDE_KINDS = ("registration", "limiting_magnitude", "more_stars")
+"""The figure kinds that draw magnitudes: their settings carry the study's ``photometry``
+(:func:`luckyao.photometry.config_with_defaults`), so that only they are redrawn when it changes."""
+
 
 def _lucky_value(lucky: dict, key: str):
     """``lucky[key]``, by default the schema's default of that key."""

@@ -6,9 +6,12 @@ The dict comes from ``studyspec.lucky.lucky_settings`` (validated; defaults in `
 
 from dataclasses import dataclass
 
+import numpy as np
+
 from ..io.hashing import canonical_json
 from ..lucky.cropped import crop_px
 from ..lucky.detector import Detector
+from ..lucky.metrics import EncircledEnergy, d50_from_radius, fwhm_arcsec
 from ..lucky.registration import Registration, search_px
 from ..lucky.scoring import MatchedStrehl
 from ..optics.imaging import Imager
@@ -103,6 +106,16 @@ class LuckySettings:
         if self.frame_strehl != "matched_filter":
             return None
         return MatchedStrehl.of(self._diffraction_limited(), self._core_fwhm_px())
+
+    def diffraction_limited_scores(self) -> tuple[float, float]:
+        """FWHM and d50 [arcsec] of the unit-flux diffraction-limited image at the camera's
+        sampling, by the measures that score the integrated images (:func:`luckyao.lucky.metrics.fwhm_arcsec`,
+        the encircled energy about its centre of gravity): the limits no image passes
+        (:func:`luckyao.lucky.limits.beyond_diffraction_limit`)."""
+        image = self._diffraction_limited().astype(np.float64)
+        scale = self.case.camera.pixel_scale_arcsec
+        radius = EncircledEnergy(image.shape[-1]).radius_px(image[None])[0]
+        return float(fwhm_arcsec(image, scale)), float(d50_from_radius(radius, scale))
 
     def _diffraction_limited(self):
         return Imager(self.case.telescope, self.case.camera).diffraction_limited
