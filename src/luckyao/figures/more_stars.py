@@ -1,14 +1,12 @@
 """An off-axis target registered on 1, 2, 4... stars (a case's ``stars``): its integrated Strehl
 and d50 against the brightest star's detected signal, and the knees against the number of stars."""
 
-from functools import partial
-
 import numpy as np
 import xarray as xr
 from matplotlib.ticker import FormatStrFormatter, LogLocator, NullFormatter
 
-from ..photometry import magnitude_of, photons_of
-from .registration import REGISTRATION_METRICS, knees, zero_magnitude_photons
+from ..photometry import Photometry
+from .registration import REGISTRATION_METRICS, knees, magnitude_axis, zero_magnitude_photons
 from .settings import FigureSettings, case_coords
 from .style import CRITERIA, LINE_STYLES, MARKERS, METRICS, colour, new_figure
 
@@ -90,6 +88,7 @@ def more_stars_data(settings: FigureSettings, datasets) -> xr.Dataset:
     )
     for metric in REGISTRATION_METRICS:
         ds[f"{metric}_knee_photons"] = knees(ds, metric)
+    ds.attrs["photometric_band"] = Photometry.from_config(settings.photometry).band
     return ds
 
 
@@ -132,14 +131,7 @@ def draw_more_stars(ds: xr.Dataset, title: str):
             ax.set_ylabel(METRICS[metric])
             ax.grid(alpha=0.3)
             zero = float(ds.zero_magnitude_photons_per_frame.sel(case=case))
-            top = ax.secondary_xaxis(
-                "top", functions=(partial(magnitude_of, zero_photons=zero), partial(photons_of, zero_photons=zero))
-            )
-            magnitudes = magnitude_of(ds.signal.values[[-1, 0]], zero)
-            top.set_xticks(np.arange(np.ceil(magnitudes[0]), np.floor(magnitudes[1]) + 1, 2))
-            top.xaxis.set_major_formatter(FormatStrFormatter("%g"))
-            top.xaxis.set_minor_formatter(NullFormatter())
-            top.set_xlabel("I magnitude" if row == 0 else "", fontsize=8)
+            magnitude_axis(ax, zero, ds.signal.values, f"{ds.attrs['photometric_band']} magnitude" if row == 0 else "")
             panel = chr(ord("a") + row * len(columns) + c)
             ax.set_title(
                 f"({panel}) {ds.label.sel(case=case).values}, read noise {read_noise:g} e-",

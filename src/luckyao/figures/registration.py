@@ -117,6 +117,21 @@ def knees(ds: xr.Dataset, metric: str) -> xr.DataArray:
     )
 
 
+def magnitude_axis(ax, zero_photons: float, signal: np.ndarray, label: str) -> None:
+    """The top axis of a panel against detected photons per frame ``signal`` (ascending): the
+    magnitude of a star giving them (:func:`luckyao.photometry.magnitude_of`, ``zero_photons`` at
+    magnitude 0), a tick every 2 magnitudes."""
+    top = ax.secondary_xaxis(
+        "top",
+        functions=(partial(magnitude_of, zero_photons=zero_photons), partial(photons_of, zero_photons=zero_photons)),
+    )
+    magnitudes = magnitude_of(signal[[-1, 0]], zero_photons)
+    top.set_xticks(np.arange(np.ceil(magnitudes[0]), np.floor(magnitudes[1]) + 1, 2))
+    top.xaxis.set_major_formatter(FormatStrFormatter("%g"))
+    top.xaxis.set_minor_formatter(NullFormatter())
+    top.set_xlabel(label, fontsize=8)
+
+
 def zero_photons_of(ds: xr.Dataset, case) -> float:
     """A registration figure's photons per frame at magnitude 0 for ``case`` (its
     ``zero_magnitude_photons_per_frame``; a dataset drawn before it had one: ``i_zero_photons_per_frame``)."""
@@ -216,15 +231,7 @@ def draw_registration(ds: xr.Dataset, title: str):
                 fontsize=9,
             )
             ax.grid(alpha=0.3)
-            zero = zero_photons_of(ds, case)
-            top = ax.secondary_xaxis(
-                "top", functions=(partial(magnitude_of, zero_photons=zero), partial(photons_of, zero_photons=zero))
-            )
-            magnitudes = magnitude_of(ds.signal.values[[-1, 0]], zero)
-            top.set_xticks(np.arange(np.ceil(magnitudes[0]), np.floor(magnitudes[1]) + 1, 2))
-            top.xaxis.set_major_formatter(FormatStrFormatter("%g"))
-            top.xaxis.set_minor_formatter(NullFormatter())
-            top.set_xlabel(f"{band} magnitude" if row == 0 else "", fontsize=8)
+            magnitude_axis(ax, zero_photons_of(ds, case), ds.signal.values, f"{band} magnitude" if row == 0 else "")
     for ax in axes[-1]:
         ax.set_xlabel("detected photons per frame")
     fig.legend(
