@@ -25,7 +25,7 @@ import pytest
 from test_ao_loop import _screens, _Setup
 from test_dm import lattice_kappa
 
-from luckyao.ao.budget import PARTS, budget_statistics, mean_gradient_matrix
+from luckyao.ao.budget import PARTS, budget_statistics, first_corrected_frame, mean_gradient_matrix
 from luckyao.ao.control import dm_slopes_matrix
 from luckyao.atmosphere.statistics import von_karman_psd
 from luckyao.studyspec.case import Case
@@ -106,6 +106,17 @@ def test_parts_sum_to_the_truth(system):
     assert np.all(parts[:, 1:] > 0)  # every part present, noise included
     stats = budget_statistics(telemetry, telemetry["axis_strehl"].values[0])
     assert float(stats["share_of_total_fluctuation"].sum()) == pytest.approx(2.0, rel=1e-3)  # parts + cross, total
+
+
+def test_budget_leaves_the_loop_alone(system):
+    """With the budget the loop's own telemetry is the same to the bit (its noiseless twin
+    sensor draws no noise and touches none of the loop's state)."""
+    budget, plain = system.budget(), system.run("plain", 0.03)
+    frames = plain.sizes["frame"]
+    for name in ("true_rms_nm", "axis_strehl", "lgs_rms_nm", "lgs_residual_rms_nm"):
+        np.testing.assert_array_equal(budget[name].values[:, :frames], plain[name].values)
+    exposures = plain.sizes["exposure"]
+    np.testing.assert_array_equal(budget["dm_commands_m"].values[:exposures], plain["dm_commands_m"].values)
 
 
 def test_fitting_follows_kappa(system):
@@ -219,7 +230,8 @@ def test_figure_draws_the_statistics(system):
     )
     make_data, draw = FIGURE_KINDS["residual_budget"]
     ds = make_data(settings, [lucky])
-    expected = budget_statistics(telemetry, strehl)
+    assert first_corrected_frame(settings.case("budget")) == 1  # the first frame's 2 steps before a command
+    expected = budget_statistics(telemetry, strehl, from_frame=1)
     np.testing.assert_allclose(ds.mean_variance_nm2.sel(case="budget"), expected.mean_variance_nm2)
     assert float(ds.strehl_correlation.sel(case="budget", part="fitting")) < -0.9
     assert draw(ds, "budget").axes

@@ -35,6 +35,7 @@ parts are not mutually orthogonal (servo lag and tomography, aliasing and noise 
 """
 
 import numpy as np
+import scipy.sparse
 import xarray as xr
 
 from ..optics.pupil import PupilGrid, TiltRemover
@@ -111,11 +112,12 @@ class ResidualBudget:
         sensed = wfs.sensed_mask
         wfs_points = np.stack([x[sensed], y[sensed]], axis=1)
         self._sensed = np.flatnonzero(sensed)
-        # phase [rad at 500 nm] -> slopes [rad]: the full phase's and its DM fit's
+        # phase [rad at 500 nm] -> slopes [rad] (sparse: each sub-aperture's edges), and the DM
+        # fit of the beacons' phases -> its slopes
         gradient = mean_gradient_matrix(wfs) / float(self._to_rad)
-        h_w = dm.influence_matrix(wfs_points[:, 0], wfs_points[:, 1])
-        self._gradient = gradient.astype(np.float32)
-        self._fitted_gradient = (gradient @ h_w @ dm.fit_matrix(wfs_points)).astype(np.float32)
+        self._gradient = scipy.sparse.csr_array(gradient.astype(np.float32))
+        self._wfs_fit = dm.fit_matrix(wfs_points).astype(np.float32)
+        self._fit_slopes = (gradient @ dm.influence_matrix(wfs_points[:, 0], wfs_points[:, 1])).astype(np.float32)
         x, y = grid.xy_m
         self._fit = dm.fit_matrix(np.stack([x[mask], y[mask]], axis=1)).astype(np.float32)
         self._surface = dm.grid_surface(grid, mask)
@@ -132,8 +134,8 @@ class ResidualBudget:
         noiseless = self.sensor.exposure_slopes(steps, layer_scales)
         n_b = noiseless.shape[0]
         phases = self.sensor.downlink_phases.reshape(len(steps), n_b, -1)[:, :, self._sensed].mean(axis=0)
-        geometric = _without_beacon_tilt((phases @ self._gradient.T).reshape(noiseless.shape))
-        ideal = _without_beacon_tilt((phases @ self._fitted_gradient.T).reshape(noiseless.shape))
+        geometric = _without_beacon_tilt((self._gradient @ phases.T).T.reshape(noiseless.shape))
+        ideal = _without_beacon_tilt((phases @ self._wfs_fit.T @ self._fit_slopes.T).reshape(noiseless.shape))
         chain = np.stack([ideal, geometric - ideal, noiseless - geometric, slopes - noiseless])
         commands = chain.reshape(len(chain), -1) @ self.command_matrix.T * self._to_rad
         self._slope_surfaces[start_step] = np.stack([self._surface(c) for c in commands]).astype(np.float32)
@@ -201,9 +203,17 @@ def telemetry_variables(rms_nm: np.ndarray, cross_nm2: np.ndarray, target: int =
     return variables
 
 
-def budget_statistics(dataset: xr.Dataset, strehl: np.ndarray, target: int = 0) -> xr.Dataset:
+def first_corrected_frame(case) -> int:
+    """The first frame of a case (:class:`luckyao.studyspec.case.Case`) whose every step holds
+    a command: the ones before hold the flat DM's steps, whose servo lag is the whole
+    DM-fitted phase."""
+    return -(-case.ao.delay_steps // case.steps_per_frame)
+
+
+def budget_statistics(dataset: xr.Dataset, strehl: np.ndarray, target: int = 0, from_frame: int = 0) -> xr.Dataset:
     """Per part of a telemetry's (or ``lucky.nc``'s) residual budget, its ``cross`` terms and
-    the ``total`` (``true_rms_nm`` of ``target``): the mean variance [nm^2] over frames, the
+    the ``total`` (``true_rms_nm`` of ``target``), over the frames from ``from_frame`` (e.g.
+    :func:`first_corrected_frame`): the mean variance [nm^2] over frames, the
     frame-to-frame variance [nm^4] of the frame variance, its share of the total's
     frame-to-frame variance (``cov(part, total) / var(total)`` of the frame variances: the
     parts' and the cross terms' shares sum to 1) and the correlation (Pearson) of the frame
@@ -213,10 +223,11 @@ def budget_statistics(dataset: xr.Dataset, strehl: np.ndarray, target: int = 0) 
     variances = [dataset[f"residual_{name}_rms_nm"].values.astype(float) ** 2 for name in PARTS]
     variances.append(dataset["residual_cross_nm2"].values.astype(float))
     variances.append(dataset["true_rms_nm"].values[target].astype(float) ** 2)
-    variances = np.array(variances)
+    variances = np.array(variances)[:, from_frame:]
+    strehl = np.asarray(strehl, dtype=float)[from_frame:]
     centred = variances - variances.mean(axis=1, keepdims=True)
     total = centred[-1]
-    strehl = np.asarray(strehl, dtype=float) - np.mean(strehl)
+    strehl = strehl - np.mean(strehl)
     with np.errstate(invalid="ignore", divide="ignore"):  # a part zero in every frame (noise without noise)
         correlation = centred @ strehl / np.sqrt(np.sum(centred**2, axis=1) * np.sum(strehl**2))
     return xr.Dataset(
@@ -235,5 +246,5 @@ def budget_statistics(dataset: xr.Dataset, strehl: np.ndarray, target: int = 0) 
             ),
         },
         coords={"part": [*PARTS, "cross", "total"]},
-        attrs={"target": target, "n_frames": variances.shape[1]},
+        attrs={"target": target, "from_frame": from_frame, "n_frames": variances.shape[1]},
     )

@@ -4,7 +4,7 @@ of its parts move with the frame's Strehl ratio (:mod:`luckyao.ao.budget`)."""
 import numpy as np
 import xarray as xr
 
-from ..ao.budget import budget_statistics
+from ..ao.budget import budget_statistics, first_corrected_frame
 from .settings import FigureSettings, case_coords
 from .style import colour, new_figure
 
@@ -12,13 +12,13 @@ from .style import colour, new_figure
 def residual_budget_data(settings: FigureSettings, datasets) -> xr.Dataset:
     """Per case (``ao.residual_budget``) and part, :func:`luckyao.ao.budget.budget_statistics`
     against the frame's recentred short-exposure Strehl ratio (``frame_recentred_strehl`` of
-    the figure's detector, the first target)."""
+    the figure's detector, the first target), from each case's first frame wholly corrected."""
     stats = []
     for name, ds in zip(settings.cases, datasets):
         if "residual_cross_nm2" not in ds:
             raise ValueError(f"residual_budget figure: case {name} has no residual budget (ao.residual_budget: true)")
         strehl = ds["frame_recentred_strehl"].isel(target=0).sel(detector=settings.detector).values
-        stats.append(budget_statistics(ds, strehl))
+        stats.append(budget_statistics(ds, strehl, from_frame=first_corrected_frame(settings.case(name))))
     return xr.concat(stats, dim="case").assign_coords(case_coords(settings, datasets))
 
 
