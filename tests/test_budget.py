@@ -235,3 +235,13 @@ def test_figure_draws_the_statistics(system):
     np.testing.assert_allclose(ds.mean_variance_nm2.sel(case="budget"), expected.mean_variance_nm2)
     assert float(ds.strehl_correlation.sel(case="budget", part="fitting")) < -0.9
     assert draw(ds, "budget").axes
+
+
+def test_declared_time_counts_the_budget():
+    """A simulation with the budget declares BUDGET_SHARE more of each step's time."""
+    from luckyao.jobs.resources import BUDGET_SHARE, simulate_seconds
+
+    config, cases = load_study("config/config.yaml")
+    case = cases["ltao_r0_13.5cm"]
+    budget = deep_merge(case, {"ao": {"residual_budget": True}})
+    assert simulate_seconds(budget) == pytest.approx((1 + BUDGET_SHARE) * simulate_seconds(case))

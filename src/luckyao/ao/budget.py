@@ -50,9 +50,9 @@ _SLOPE_PARTS = ("tomography", "aliasing", "sensor", "noise")
 """The parts that come with an exposure's slopes (each its commands' surface)."""
 
 
-def mean_gradient_matrix(wfs) -> np.ndarray:
-    """``G`` (2 n_valid, n_sensed) float64 [1 / m]: each valid sub-aperture's mean x and y
-    gradient of a phase on the WFS grid's sensed samples (``wfs.sensed_mask``, row-major) over
+def mean_gradient_matrix(wfs) -> scipy.sparse.csr_array:
+    """``G`` (2 n_valid, n_sensed) float64 [1 / m], sparse: each valid sub-aperture's mean x and
+    y gradient of a phase on the WFS grid's sensed samples (``wfs.sensed_mask``, row-major) over
     its sensed area, as the sensor's centroid sees it: along each run of ``m`` neighbouring
     sensed samples the edge-to-edge difference over its ``m dx`` (the end samples' differences
     extrapolated half a sample out, so a linear phase is exact), the runs weighted by length."""
@@ -60,11 +60,11 @@ def mean_gradient_matrix(wfs) -> np.ndarray:
     sensed = wfs.sensed_mask
     index = np.full((n, n), -1)
     index[sensed] = np.arange(int(sensed.sum()))
-    out = np.zeros((2, wfs.n_valid, int(sensed.sum())))
+    rows, columns, values = [], [], []
     for v, (iy, ix) in enumerate(wfs.subaperture_index):
         block = index[iy * n_s : (iy + 1) * n_s, ix * n_s : (ix + 1) * n_s]
         for axis, lines in enumerate((block, block.T)):
-            length = 0
+            entries, length = [], 0
             for line in lines:
                 for run in np.split(line, np.flatnonzero(line < 0)):
                     run = run[run >= 0]
@@ -73,11 +73,15 @@ def mean_gradient_matrix(wfs) -> np.ndarray:
                         continue
                     weights = np.ones(m - 1) if m > 2 else np.array([2.0])
                     weights[[0, -1]] = 1.5 if m > 2 else 2.0
-                    np.add.at(out[axis, v], run[1:], weights)
-                    np.add.at(out[axis, v], run[:-1], -weights)
+                    entries += [(run[1:], weights), (run[:-1], -weights)]
                     length += m
-            out[axis, v] /= length * wfs.grid.dx_m
-    return out.reshape(2 * wfs.n_valid, -1)
+            for samples, weights in entries:
+                rows.append(np.full(len(samples), axis * wfs.n_valid + v))
+                columns.append(samples)
+                values.append(weights / (length * wfs.grid.dx_m))
+    shape = (2 * wfs.n_valid, int(sensed.sum()))
+    coo = scipy.sparse.coo_array((np.concatenate(values), (np.concatenate(rows), np.concatenate(columns))), shape)
+    return coo.tocsr()  # duplicates summed
 
 
 def _without_beacon_tilt(slopes: np.ndarray) -> np.ndarray:
@@ -115,7 +119,7 @@ class ResidualBudget:
         # phase [rad at 500 nm] -> slopes [rad] (sparse: each sub-aperture's edges), and the DM
         # fit of the beacons' phases -> its slopes
         gradient = mean_gradient_matrix(wfs) / float(self._to_rad)
-        self._gradient = scipy.sparse.csr_array(gradient.astype(np.float32))
+        self._gradient = gradient.astype(np.float32)
         self._wfs_fit = dm.fit_matrix(wfs_points).astype(np.float32)
         self._fit_slopes = (gradient @ dm.influence_matrix(wfs_points[:, 0], wfs_points[:, 1])).astype(np.float32)
         x, y = grid.xy_m
