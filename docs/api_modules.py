@@ -40,7 +40,13 @@ API_MODULES = {
         "luckyao.layer_tomography.assembly",
         "luckyao.layer_tomography.correction",
     ],
-    "Adaptive optics": ["luckyao.ao.dm", "luckyao.ao.control", "luckyao.ao.correction", "luckyao.ao.apodisation"],
+    "Adaptive optics": [
+        "luckyao.ao.dm",
+        "luckyao.ao.control",
+        "luckyao.ao.correction",
+        "luckyao.ao.apodisation",
+        "luckyao.ao.budget",
+    ],
     "Lucky imaging": [
         "luckyao.lucky.detector",
         "luckyao.lucky.metrics",

@@ -105,6 +105,15 @@ def calibration_file(case):
     return product.path if product else []
 
 
+def simulation_calibration(case):
+    """The WFS calibration a case's simulation reads, or []: none with an LGS twin or with
+    recorded slopes, unless its residual budget (ao.residual_budget) runs the sensor's
+    noiseless twin."""
+    if LGS_TWIN[case] or (SLOPES[case] and not CASES[case].get("ao", {}).get("residual_budget", False)):
+        return []
+    return calibration_file(case)
+
+
 def slopes_file(case):
     """The AO case's LGS slopes product (config.slopes_spec), or [] without AO."""
     product = SLOPES[case]
@@ -214,7 +223,7 @@ def simulation_files(case):
         files.append(f"results/cases/{case}/frames.nc")
     files += [] if twin else listify(reconstructor_file(case))
     files += listify(commands_file(case))
-    files += [] if twin or SLOPES[case] else listify(calibration_file(case))
+    files += listify(simulation_calibration(case))
     if SLOPES[case]:
         files += [slopes_file(case), *listify(calibration_file(SLOPES_CASES[SLOPES[case].key][0]))]
     if twin:

@@ -36,7 +36,7 @@ rule simulate:
         screens_metadata=lambda w: TURBULENCE[w.case].path,
         reconstructor=lambda w: [] if LGS_TWIN[w.case] else reconstructor_file(w.case),
         commands=lambda w: commands_file(w.case),
-        calibration=lambda w: [] if LGS_TWIN[w.case] or SLOPES[w.case] else calibration_file(w.case),
+        calibration=lambda w: simulation_calibration(w.case),
         # ancient: a remade slopes product or a rerun of the twin for its AO alone changes no
         # slope; whatever does (the LGS chain's config, screens, seed, code) is this case's own
         # params and inputs too

@@ -13,7 +13,8 @@ quality_vs_distance, quality_vs_parameter and comparisons kinds; diameter: quali
 limiting_magnitude; more_stars: more_stars; signal:
 quality_vs_signal; wavefront: asterism, rms_truth, residuals; tables:
 long_exposure_check, long_exposure_table, long_exposure_markdown, value_with_error;
-gallery: psf_gallery; fourier: fourier (Fourier lucky imaging against shift-and-add).
+gallery: psf_gallery; fourier: fourier (Fourier lucky imaging against shift-and-add); budget:
+residual_budget.
 """
 
 import base64
@@ -24,6 +25,7 @@ from pathlib import Path
 
 from ..io.datasets import open_dataset, provenance, require_finite_lucky, write_dataset
 from ..io.hashing import sha256
+from .budget import draw_residual_budget, residual_budget_data
 from .diameter import draw_quality_vs_diameter, quality_vs_diameter_data
 from .fourier import draw_fourier, fourier_data
 from .gallery import draw_psf_gallery, psf_gallery_data
@@ -72,6 +74,7 @@ FIGURE_KINDS = {
     "psf_gallery": (psf_gallery_data, draw_psf_gallery),
     "fourier": (fourier_data, draw_fourier),
     "more_stars": (more_stars_data, draw_more_stars),
+    "residual_budget": (residual_budget_data, draw_residual_budget),
 }
 
 REGISTRATION_KINDS = ("registration", "quality_vs_signal", "limiting_magnitude", "fourier", "more_stars")

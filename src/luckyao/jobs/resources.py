@@ -194,6 +194,10 @@ IMAGING_SHARE = 0.45
 LGS_SHARE = 0.63
 """The LGS chain's share of a step (4 beacons' propagation 0.52 and WFS 0.27 of the default AO
 case's 1.26 ms at 4.2 m): what a slopes product measures."""
+BUDGET_SHARE = 1.0
+"""The residual budget's share of a step (``ao.residual_budget``: a noiseless twin of the LGS chain,
+the DM fits of the science and beacon phases and the parts' surfaces): +2.1 ms on the default AO
+case's 2.09 at 4.2 m, measured on a loaded machine (docs/performance.md)."""
 SCREENS_NS_PER_SAMPLE = 141.0
 """One core's time per screen sample (the paper's 2.3e9 samples: 5.4 minutes of CPU)."""
 RECONSTRUCTOR_S_16, RECONSTRUCTOR_EXPONENT = 1.7, 1.33
@@ -252,8 +256,9 @@ def slopes_seconds(case: dict) -> float:
 
 def simulate_seconds(case: dict) -> float:
     """A simulation: its steps at :func:`step_ms` (the whole loop: an AO case replaying its LGS
-    chain's slopes takes less)."""
-    return FrameClock.from_config(case).n_steps * step_ms(case) / 1e3
+    chain's slopes takes less), :data:`BUDGET_SHARE` more with the residual budget."""
+    budget = BUDGET_SHARE if case.get("ao", {}).get("residual_budget", False) else 0.0
+    return FrameClock.from_config(case).n_steps * (1 + budget) * step_ms(case) / 1e3
 
 
 def simulate_minutes(case: dict) -> int:

@@ -194,6 +194,9 @@ def lucky_case(
     for name in ("true_rms_nm", "lgs_rms_nm", "lgs_residual_rms_nm", "transmitted_flux"):
         if name in telemetry:
             ds[name] = telemetry[name]
+    for name in telemetry.data_vars:  # the residual budget's parts (ao.residual_budget)
+        if name.startswith("residual_"):
+            ds[name] = telemetry[name]
     ds["mean_r0_500nm_m"] = (
         (),
         float(telemetry.r0_500nm_m.mean()),

@@ -13,12 +13,14 @@
   phases is the per-frame truth. A frame is the mean of its steps' unit-flux images.
 """
 
+import dataclasses
 import json
 
 import numpy as np
 import xarray as xr
 
 from ..ao.apodisation import Apodiser, DelayedApodisation, SubapertureRegions
+from ..ao.budget import PARTS, ResidualBudget, telemetry_variables
 from ..ao.correction import DelayedDm, OpenLoopCorrection
 from ..atmosphere.screens import ScreenSet
 from ..io.datasets import open_dataset, require_finite
@@ -91,13 +93,15 @@ class SciencePath:
         dm=None,
         truth: bool = True,
         apodisation: DelayedApodisation | None = None,
+        budget: ResidualBudget | None = None,
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
         """The frame's images (imaged, n, n) float32 (the mean of its steps' images, of unit
         flux for the full pupil), their value on the axis (imaged,) (:meth:`Imager.axis_value`)
         and, with ``truth``, the tilt-removed rms (targets,) [rad at 500 nm] of its residual
         phases over the whole pupil; ``dm`` (anything with ``surface_at(step)``) corrects every
         step, ``apodisation`` (with the oracle driver fed the first target's true phases here)
-        apodises it: the transmitted flux of the frame is then :attr:`transmitted_flux`."""
+        apodises it: the transmitted flux of the frame is then :attr:`transmitted_flux`; ``budget``
+        is fed the first target's uncorrected phase of every step."""
         self._intensity.fill(0.0)
         rms2 = np.zeros(len(self.targets)) if truth else None
         phases = self.propagator.sample_valid(steps, layer_scales)  # (k, n_targets, n_valid)
@@ -109,6 +113,8 @@ class SciencePath:
                     apodisation.observe(int(step), phase_500[0])
                 transmission = apodisation.at(int(step))
                 self.transmitted_flux += float(np.mean(transmission)) / len(steps)
+            if budget is not None:
+                budget.step(int(step), phase_500[0])
             if dm is not None:
                 phase_500 = phase_500 - dm.surface_at(int(step))
             imaged = phase_500 if self._all_imaged else phase_500[self.imaged]
@@ -161,6 +167,7 @@ def simulate(
     imaged_targets=None,
     block_frames: int = 32,
     lgs_rms_nm: np.ndarray | None = None,
+    budget_sensor: LgsSensor | None = None,
 ) -> xr.Dataset:
     """Run the case; ``write_frames(start, frames (imaged target, k, n, n))`` receives the
     noiseless unit-flux frames of ``imaged_targets`` (indices into ``case.targets``,
@@ -173,7 +180,9 @@ def simulate(
     ``ao`` settings, :func:`luckyao.steps.reconstructor.build_commands`) the DM
     corrects every step, each frame gets its ``lgs_residual_rms_nm`` and every
     exposure's DM commands are recorded (``dm_commands_m``), so that the science path
-    of the targets not imaged can be replayed (:class:`Replay`).
+    of the targets not imaged can be replayed (:class:`Replay`). With AO and a
+    ``budget_sensor`` (the LGS sensor's twin without noise) each frame also gets the
+    residual budget of the first target (:mod:`luckyao.ao.budget`).
 
     Per frame it records the truth (tilt-removed rms) and the imaged targets' frame
     value on the optical axis over the diffraction-limited peak, whose mean over frames
@@ -200,6 +209,20 @@ def simulate(
                 .influence_matrix(points[:, 0], points[:, 1])
                 .astype(np.float32)
             )  # (n_points, n_act) [m / m]
+    budget = None
+    if budget_sensor is not None:
+        if correction is None or sensor is None:
+            raise ValueError("the residual budget needs AO and the LGS sensor (or its recorded slopes)")
+        budget = ResidualBudget(
+            case.ao.deformable_mirror(case.telescope),
+            commands[0],
+            budget_sensor,
+            imager.grid,
+            imager.mask,
+            correction.dm,
+        )
+        budget_rms_nm = np.empty((len(PARTS), n_frames))
+        budget_cross_nm2 = np.empty(n_frames)
     steps_max = science.propagator.n_steps_max
     if sensor is not None:
         steps_max = min(steps_max, sensor.n_steps_max)
@@ -243,8 +266,10 @@ def simulate(
                 )
                 lgs_rms[:, frame] = lucky_frame_rms_nm(estimator.rms_nm(slopes))
                 if correction is not None:
-                    for start_step, exposure in zip(starts, slopes):
+                    for i, start_step, exposure in zip(clock.exposure_offsets(), starts, slopes):
                         dm_commands[clock.exposure(start_step)] = correction.measure(int(start_step), exposure)
+                        if budget is not None:
+                            budget.exposure(int(start_step), steps[i : i + e], layer_scales[i : i + e], exposure)
                         if apodisation is not None and apodisation.point_labels is not None:
                             apodisation.from_estimate(
                                 int(start_step),
@@ -256,8 +281,10 @@ def simulate(
                     )
                     lgs_residual_rms[:, frame] = lucky_frame_rms_nm(estimator.rms_nm(residual))
             buffer[:, j], axis_strehl[imaged, frame], rms = science.frame(
-                frame, steps, layer_scales, correction, apodisation=apodisation
+                frame, steps, layer_scales, correction, apodisation=apodisation, budget=budget
             )
+            if budget is not None:
+                budget_rms_nm[:, frame], budget_cross_nm2[frame] = budget.frame_rms_nm()
             if apodisation is not None:
                 transmitted[frame] = science.transmitted_flux
             true_rms_nm[:, frame] = phase_rad_to_nm(rms, REFERENCE_WAVELENGTH_M)
@@ -298,6 +325,8 @@ def simulate(
                     f"{case.ao.apodisation.driver}",
                 },
             )
+        if budget is not None:
+            extra.update(telemetry_variables(budget_rms_nm, budget_cross_nm2))
         extra["dm_commands_m"] = (
             ("exposure", "actuator"),
             dm_commands,
@@ -393,6 +422,10 @@ class TimeLoop:
             self.sensor, self.estimator = slopes, LgsRmsEstimator(reconstructors, slopes.n_slopes)
         elif reconstructors is not None:
             self.sensor, self.estimator = lgs_chain(case, screens, reconstructors, seed, calibration)
+        self.budget_sensor = None
+        if case.ao is not None and case.ao.residual_budget:
+            noiseless = dataclasses.replace(case, wfs=dataclasses.replace(case.wfs, photons_per_subaperture=None))
+            self.budget_sensor = lgs_sensor(noiseless, screens, seed, calibration)
 
     def run(self, write_frames) -> xr.Dataset:
         """:func:`simulate` of the case (``write_frames`` as there): its telemetry."""
@@ -405,6 +438,7 @@ class TimeLoop:
             self.commands,
             self.imaged_targets,
             lgs_rms_nm=self.lgs_rms_nm,
+            budget_sensor=self.budget_sensor,
         )
 
 

@@ -72,7 +72,8 @@ class TomographySettings:
 
 @dataclass(frozen=True)
 class AoSettings:
-    """Open-loop AO: ``mode`` none / ltao / glao, the DM, the delay and what is corrected."""
+    """Open-loop AO: ``mode`` none / ltao / glao, the DM, the delay, what is corrected and
+    whether the residual is budgeted."""
 
     mode: str
     n_actuators: int
@@ -81,6 +82,8 @@ class AoSettings:
     delay_steps: int
     correction_direction_arcsec: tuple[float, float]
     glao_max_height_m: float
+    residual_budget: bool
+    """Split the true residual along the first target into its parts (:mod:`luckyao.ao.budget`)."""
     apodisation: ApodisationSettings | None = None
 
     @property
@@ -100,6 +103,7 @@ def ao_from(block: dict) -> AoSettings:
     apodisation = block.get("apodisation")
     return AoSettings(
         **{
+            **case_defaults("ao"),
             **block,
             "correction_direction_arcsec": tuple(block["correction_direction_arcsec"]),
             "apodisation": None if apodisation is None else ApodisationSettings(**apodisation),

@@ -68,6 +68,10 @@ def _check_case(name: str, case: dict, turbulence: dict) -> None:
             f"config key '{where}.ao.apodisation': needs ao.mode ltao or glao (it is applied with "
             "each exposure's DM command)"
         )
+    if case["ao"].get("residual_budget") and case["ao"]["mode"] == "none":
+        raise ConfigError(
+            f"config key '{where}.ao.residual_budget': needs ao.mode ltao or glao (it splits the AO residual)"
+        )
     if case["telescope"]["obscuration_m"] >= case["telescope"]["diameter_m"]:
         raise ConfigError(f"config key '{where}.telescope.obscuration_m': must be below diameter_m")
     reference = case.get("reference_target")
@@ -317,6 +321,13 @@ def _check_figure(fig_id: str, figure: dict, cases: dict, config: dict) -> None:
                 raise ConfigError(
                     f"config key 'figures.{fig_id}.cases': case '{case}' has one target; "
                     "quality_vs_distance needs a field of targets"
+                )
+    if figure["kind"] == "residual_budget":
+        for case in figure["cases"]:
+            if case in cases and not cases[case]["ao"].get("residual_budget", False):
+                raise ConfigError(
+                    f"config key 'figures.{fig_id}.cases': case '{case}' has no residual budget "
+                    "(ao.residual_budget: true)"
                 )
     if figure["kind"] == "more_stars":
         for case in figure["cases"]:

@@ -98,6 +98,12 @@ class LgsSensor:
         self._down.sample(steps, layer_scales, out=self._down_buffer)
         self._up.sample(steps, layer_scales, out=self._up_buffer)
 
+    @property
+    def downlink_phases(self) -> np.ndarray:
+        """The sampled exposure's downlink phases (exposure_steps, n_beacons, n, n) float32 [rad
+        at 500 nm] on the WFS grid (meaningful on ``wfs.sensed_mask``)."""
+        return self._down_buffer
+
     def slopes(self) -> np.ndarray:
         """Tilt-removed slopes (n_beacons, 2, n_valid) [rad] of the sampled exposure."""
         return measure_slopes(
