@@ -95,8 +95,8 @@ def more_stars_data(settings: FigureSettings, datasets) -> xr.Dataset:
 def draw_more_stars(ds: xr.Dataset, title: str):
     """Columns: case x read noise. Rows: Strehl and d50 against the brightest star's signal (colour:
     number of stars; line style: registration method; thin lines: noiseless detector), then the knees
-    against the number of stars (colour and marker: method; line style: metric). The first criterion
-    and fraction."""
+    against the number of stars (colour, after the counts' colours, and marker: method; line style:
+    metric). The first criterion and fraction."""
     criterion, fraction = ds.criterion.values[0], float(ds.fraction.values[0])
     methods = [m for m in ds.registration.values if m in DRAWN_METHODS] or list(ds.registration.values)
     columns = [(case, r) for case in ds.case.values for r in ds.read_noise.values]
@@ -128,7 +128,8 @@ def draw_more_stars(ds: xr.Dataset, title: str):
                 ax.yaxis.set_major_formatter(FormatStrFormatter("%g"))
                 ax.yaxis.set_minor_formatter(NullFormatter())
             ax.set_xlabel("brightest star's photons per frame", fontsize=8)
-            ax.set_ylabel(METRICS[metric])
+            if c == 0:
+                ax.set_ylabel(METRICS[metric])
             ax.grid(alpha=0.3)
             zero = float(ds.zero_magnitude_photons_per_frame.sel(case=case))
             magnitude_axis(ax, zero, ds.signal.values, f"{ds.attrs['photometric_band']} magnitude" if row == 0 else "")
@@ -144,7 +145,7 @@ def draw_more_stars(ds: xr.Dataset, title: str):
                 ax.plot(
                     ds.n_stars,
                     at[f"{metric}_knee_photons"].sel(registration=method, read_noise=read_noise),
-                    color=colour(k),
+                    color=colour(len(ds.n_stars) + k),  # not a count of stars' colour
                     marker=MARKERS[k % 8],
                     ls=LINE_STYLES[s % 4],
                     label=f"{method}, {'Strehl' if metric == 'strehl' else 'd50'} knee",
@@ -152,22 +153,24 @@ def draw_more_stars(ds: xr.Dataset, title: str):
         ax.set_yscale("log")
         ax.set_xticks(ds.n_stars.values)
         ax.set_xlabel("number of stars")
-        ax.set_ylabel("knee [brightest star's photons per frame]")
+        if c == 0:
+            ax.set_ylabel("knee [brightest star's\nphotons per frame]")
         ax.grid(alpha=0.3)
         ax.set_title(f"({chr(ord('a') + 2 * len(columns) + c)}) knees", loc="left", fontsize=9)
-    axes[2, -1].legend(
-        fontsize=7,
-        title="the signal from which Strehl stays >= 90 %\n(d50 within 10 %) of the noiseless detector's",
-        title_fontsize=7,
+    handles, labels = (
+        sum(pair, []) for pair in zip(axes[0, 0].get_legend_handles_labels(), axes[2, 0].get_legend_handles_labels())
     )
+    last = chr(ord("a") + 2 * len(columns) - 1)
     fig.legend(
-        *axes[0, 0].get_legend_handles_labels(),
+        handles,
+        labels,
         loc="outside lower center",
-        ncol=3,
+        ncol=5,
         fontsize=8,
-        title=f"(a-{chr(ord('a') + 2 * len(columns) - 1)}) {100 * fraction:g} % of frames selected by the brightest "
-        f"star's {CRITERIA.get(criterion, criterion)}, scored on the noiseless frames;\ncolour: stars registered on; "
-        "line style: registration; thin lines: noiseless detector",
+        title=f"(a-{last}) {100 * fraction:g} % of frames selected by the brightest star's "
+        f"{CRITERIA.get(criterion, criterion)}, scored on the noiseless frames; colour: stars registered on; "
+        "line style: registration; thin lines: noiseless detector\nknees: the signal from which the Strehl stays "
+        "at >= 90 % (the d50 within 10 %) of the noiseless detector's with as many stars",
         title_fontsize=8,
     )
     fig.suptitle(f"{title}: an off-axis target registered on several stars")
