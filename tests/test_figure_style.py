@@ -18,7 +18,7 @@ from luckyao.figures.style import DISTINCT_COLOURS, DPI, PALETTE, SCREEN_INCHES,
 from luckyao.io.datasets import open_dataset
 
 FIGURES = Path(__file__).resolve().parents[1] / "figures"
-PUBLISHED = sorted(FIGURES.glob("paper/*.nc")) + sorted(FIGURES.glob("telescopes/*.nc"))
+PUBLISHED = [path for run in ("paper", "telescopes", "stars") for path in sorted(FIGURES.glob(f"{run}/*.nc"))]
 
 
 def drawn(path: Path, laid_out: bool = True):

@@ -8,7 +8,7 @@ their datasets). With ``--simulate DIR`` each PNG is also written as a dichromat
 ``DIR/<name>.<vision>.png``, to look at.
 
 Usage (from the checkout): .venv/bin/python tools/colour_check.py [--simulate DIR] [PNG ...]
-(default: figures/paper/*.png figures/telescopes/*.png figures/*.png)."""
+(default: figures/paper/*.png figures/telescopes/*.png figures/stars/*.png figures/*.png)."""
 
 import argparse
 import glob
@@ -62,7 +62,7 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
     pngs = args.pngs or [
         Path(p)
-        for pattern in ("figures/paper/*.png", "figures/telescopes/*.png", "figures/*.png")
+        for pattern in ("figures/paper/*.png", "figures/telescopes/*.png", "figures/stars/*.png", "figures/*.png")
         for p in sorted(glob.glob(pattern))
     ]
     if not pngs:

@@ -2,7 +2,8 @@
 (``luckyao.api.draw``, as the workflow draws it) to ``<name>.png`` beside it. For a change of
 drawing only (style, labels, layout): the datasets, and so every number, stay as they are.
 
-Usage (from the checkout): .venv/bin/python tools/redraw_figures.py figures/paper/*.nc figures/telescopes/*.nc"""
+Usage (from the checkout):
+    .venv/bin/python tools/redraw_figures.py figures/paper/*.nc figures/telescopes/*.nc figures/stars/*.nc"""
 
 import sys
 from pathlib import Path

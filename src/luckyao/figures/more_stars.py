@@ -95,8 +95,8 @@ def more_stars_data(settings: FigureSettings, datasets) -> xr.Dataset:
 def draw_more_stars(ds: xr.Dataset, title: str):
     """Columns: case x read noise. Rows: Strehl and d50 against the brightest star's signal (colour:
     number of stars; line style: registration method; thin lines: noiseless detector), then the knees
-    against the number of stars (colour, after the counts' colours, and marker: method; line style:
-    metric). The first criterion and fraction."""
+    against the number of stars (one colour after the counts'; marker: method; line style: metric).
+    The first criterion and fraction."""
     criterion, fraction = ds.criterion.values[0], float(ds.fraction.values[0])
     methods = [m for m in ds.registration.values if m in DRAWN_METHODS] or list(ds.registration.values)
     columns = [(case, r) for case in ds.case.values for r in ds.read_noise.values]
@@ -145,7 +145,7 @@ def draw_more_stars(ds: xr.Dataset, title: str):
                 ax.plot(
                     ds.n_stars,
                     at[f"{metric}_knee_photons"].sel(registration=method, read_noise=read_noise),
-                    color=colour(len(ds.n_stars) + k),  # not a count of stars' colour
+                    color=colour(len(ds.n_stars)),  # not a count of stars' colour: methods by marker
                     marker=MARKERS[k % 8],
                     ls=LINE_STYLES[s % 4],
                     label=f"{method}, {'Strehl' if metric == 'strehl' else 'd50'} knee",
