@@ -146,7 +146,7 @@ def draw_more_stars(ds: xr.Dataset, title: str):
                     ds.n_stars,
                     at[f"{metric}_knee_photons"].sel(registration=method, read_noise=read_noise),
                     color=colour(len(ds.n_stars)),  # not a count of stars' colour: methods by marker
-                    marker=MARKERS[k % 8],
+                    marker=MARKERS[(len(ds.n_stars) + k) % 8],  # nor a count's marker
                     ls=LINE_STYLES[s % 4],
                     label=f"{method}, {'Strehl' if metric == 'strehl' else 'd50'} knee",
                 )
