@@ -246,8 +246,10 @@ def test_fourier_config_is_checked_before_any_job():
     assert "fourier_fractions" not in lucky_settings(study, cases, "bad")
     assert lucky_settings(study, cases, "bad") == lucky_settings(tiny(), cases, "bad")
     # the pre-flight's memory: 1.25 x (at least a chunk of 64) float32 amplitudes at each of the 64-pixel
-    # crop's 2,112 frequencies, per detector (2) and method (cog)
-    assert fourier_memory_bytes(lucky_settings(study, cases, "good")) == 1.25 * 64 * 2112 * 4 * 2
+    # crop's 2,112 frequencies, per detector (2) and method (cog), for the run and each time block
+    settings = lucky_settings(study, cases, "good")
+    runs = 1 + settings["error_blocks"]
+    assert fourier_memory_bytes(settings) == 1.25 * 64 * 2112 * 4 * 2 * runs
     assert fourier_memory_bytes(lucky_settings(study, cases, "bad")) == 0
 
 

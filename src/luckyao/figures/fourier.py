@@ -155,15 +155,13 @@ def draw_fourier(ds: xr.Dataset, title: str):
                 for j, (values, error) in enumerate(zip(saa, saa_error)):
                     style = {"ls": LINE_STYLES[(j + 1) % 4], "marker": MARKERS[(j + 1) % 8]}
                     ax.errorbar(x, values, error, color=colour(k), ms=4, lw=1.0, capsize=2, **style)
-            if metric == "signal":
+            if metric == "signal":  # the quantity in the title: y labels would run into the next panel
                 ax.set_xscale("log")
                 ax.set_xlabel("detected photons per frame")
-                ax.set_ylabel("Strehl ratio (noiseless frames)")
-                ax.set_title(f"{method}: {cell[0]:g} e- read noise, {100 * cell[1]:g} % kept", fontsize=9)
+                ax.set_title(f"{method}, {cell[0]:g} e-, {100 * cell[1]:g} % kept: Strehl (noiseless)", fontsize=8)
             else:
                 fraction_axis(ax)
-                ax.set_ylabel(METRICS[metric])
-                ax.set_title(f"{method}", fontsize=9)
+                ax.set_title(f"{method}: {METRICS[metric]}", fontsize=8)
             ax.grid(alpha=0.3)
     first = axes[0, 0]
     handles = [

@@ -170,17 +170,23 @@ def lucky_memory_bytes(settings: dict) -> float:
 
 def fourier_memory_bytes(settings: dict) -> float:
     """Fourier lucky imaging's amplitudes (``fourier_fractions``, :mod:`luckyao.lucky.fourier`): per
-    detector and registration method, 1.25 x the largest count kept below all frames, float32, at each
-    frequency of the crop's half plane (``image_crop_px``, 64: 2,112); 0 without it."""
+    detector and registration method, for the whole run and each of its ``error_blocks`` time blocks
+    (:class:`.lucky.fourier.FourierRun`), 1.25 x the largest count kept below all its frames (at least
+    a chunk of 64), float32, at each frequency of the crop's half plane (``image_crop_px``, 64: 2,112);
+    0 without it. Measured at paper fidelity (19 detectors, 4 methods, 10 blocks, 10 % kept): 3.7 GB
+    more than without it, against 4.0 GB estimated."""
     fractions = settings.get("fourier_fractions")
     if not fractions:
         return 0.0
-    n_frames = frame_count(settings["case_config"])
-    keep = max([round(f * n_frames) for f in fractions if round(f * n_frames) < n_frames] or [0])
+    n_frames, n_blocks = frame_count(settings["case_config"]), settings.get("error_blocks", 0)
+
+    def kept(n: int) -> int:
+        return max(max([round(f * n) for f in fractions if round(f * n) < n] or [0]), 64)
+
+    runs = kept(n_frames) + (n_blocks * kept(n_frames // n_blocks) if n_blocks else 0)
     n_pixels = settings["case_config"]["camera"]["n_pixels"]
     crop = min(settings.get("image_crop_px", 64) or n_pixels, n_pixels)
-    per_set = 1.25 * max(keep, 64) * crop * (crop // 2 + 1) * 4.0
-    return per_set * len(settings["detectors"]) * len(registrations(settings))
+    return 1.25 * runs * crop * (crop // 2 + 1) * 4.0 * len(settings["detectors"]) * len(registrations(settings))
 
 
 # Time estimates [s] of one job's work on one core of the measuring machine (docs/performance.md;
