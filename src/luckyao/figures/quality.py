@@ -4,7 +4,7 @@ off-axis distance, vs a swept parameter, and paired differences between cases.""
 import numpy as np
 import xarray as xr
 
-from ..lucky.accumulation import batch_mean_error
+from ..lucky.accumulation import batch_mean_error, block_error
 from ..lucky.dataset import NOISE_DOMINATED, noise_flag_attrs
 from ..lucky.dataset import noise_dominated as noise_dominated_values
 from ..studyspec.schema import key_units
@@ -445,7 +445,7 @@ def comparisons_data(settings: FigureSettings, datasets) -> xr.Dataset:
                 raise ValueError(f"pair {pair['label']}: {a.sizes['block']} and {b.sizes['block']} time blocks")
             blocks = (a[f"{metric}_block"] - b[f"{metric}_block"]).values  # (block, fraction)
             value.append((a[metric] - b[metric]).values)
-            paired.append(blocks.std(axis=0, ddof=1) / np.sqrt(blocks.shape[0]))
+            paired.append(block_error(blocks))
             unpaired.append(np.hypot(a[f"{metric}_error"].values, b[f"{metric}_error"].values))
         units = datasets[0][metric].attrs["units"]
         dims = ("pair", "fraction")

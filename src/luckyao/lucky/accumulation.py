@@ -17,12 +17,18 @@ from .metrics import EncircledEnergy, score_images
 from .ranking import criterion_bins, fraction_counts, last_bins
 
 
+def block_error(block_values: np.ndarray) -> np.ndarray:
+    """Monte-Carlo standard error of a value from its independent time blocks' values (block, ...):
+    their standard deviation over ``sqrt(n_blocks)`` (batch means)."""
+    return block_values.std(axis=0, ddof=1) / np.sqrt(len(block_values))
+
+
 def batch_mean_error(values: np.ndarray, n_blocks: int) -> float:
     """Standard error of the mean of a correlated series from ``n_blocks`` batch means, the
     blocks of :class:`TimeBlocks` (valid when blocks are longer than the correlation time)."""
     usable = len(values) // n_blocks * n_blocks
     means = np.asarray(values[:usable], dtype=float).reshape(n_blocks, -1).mean(axis=1)
-    return float(means.std(ddof=1) / np.sqrt(n_blocks))
+    return float(block_error(means))
 
 
 def recentring_shifts_px(centroids_px: np.ndarray, n_pixels: int) -> np.ndarray:

@@ -4,7 +4,7 @@ UDUNITS-2's: a count (photons, electrons, pixels) is ``1``, what it counts said 
 import numpy as np
 import xarray as xr
 
-from .accumulation import TimeBlocks
+from .accumulation import TimeBlocks, block_error
 
 NOISE_DOMINATED = 0.3
 """A noisy detector's value is noise-dominated when it departs from the value of the same
@@ -209,7 +209,7 @@ def add_block_scores(ds: xr.Dataset, blocks: TimeBlocks) -> None:
         )
         ds[f"{metric}_error"] = (
             sel,
-            values_b.std(axis=0, ddof=1) / np.sqrt(blocks.n_blocks),
+            block_error(values_b),
             _attrs(
                 ds[metric].attrs["units"],
                 f"Monte-Carlo standard error of {metric}, from {blocks.n_blocks} time blocks (batch means)",

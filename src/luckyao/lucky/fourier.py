@@ -48,6 +48,7 @@ import scipy.fft
 import xarray as xr
 
 from . import image_helpers
+from .accumulation import block_error
 from .metrics import EncircledEnergy, d50_from_radius, fwhm_arcsec, strehl_flux, strehl_from
 from .ranking import fraction_counts
 
@@ -203,7 +204,7 @@ class FourierSelection:
             self._add(1, i, keep, clean, clean_flux)
         if expected is not None:
             kept = np.array([expected[mask[:, 0]].sum() for mask in keep])
-            self.expected[i] = np.where(np.isnan(self.expected[i]), 0.0, self.expected[i]) + kept
+            self.expected[i] = np.nan_to_num(self.expected[i]) + kept  # NaN until the first
 
     def _add(self, which: int, i: int, keep: np.ndarray, spectra: np.ndarray, flux: np.ndarray) -> None:
         for j, mask in enumerate(keep):
@@ -341,7 +342,7 @@ def add_fourier(ds: xr.Dataset, run: FourierRun, detectors, peak: float, scale: 
         ds[f"fourier_{metric}_noiseless"] = (dims, values[1].T, {"units": units, "long_name": f"{name} {same}"})
         if len(blocks) > 1:
             per_block = np.stack([b[("strehl", "fwhm_arcsec", "d50_arcsec").index(metric)] for b in blocks])
-            error = per_block.std(axis=0, ddof=1) / np.sqrt(len(blocks))  # (2, det, fraction)
+            error = block_error(per_block)  # (2, det, fraction)
             for suffix, e in zip(("", "_noiseless"), error):
                 ds[f"fourier_{metric}{suffix}_error"] = (
                     dims,
