@@ -38,6 +38,7 @@ include: "workflow/rules/turbulence.smk"
 include: "workflow/rules/reconstructor.smk"
 include: "workflow/rules/calibration.smk"
 include: "workflow/rules/simulate.smk"
+include: "workflow/rules/learned.smk"
 include: "workflow/rules/lucky.smk"
 include: "workflow/rules/figures.smk"
 

@@ -46,6 +46,7 @@ API_MODULES = {
         "luckyao.ao.correction",
         "luckyao.ao.apodisation",
         "luckyao.ao.budget",
+        "luckyao.ao.laser_criteria",
     ],
     "Lucky imaging": [
         "luckyao.lucky.detector",
@@ -56,6 +57,7 @@ API_MODULES = {
         "luckyao.lucky.limits",
         "luckyao.lucky.pipeline",
         "luckyao.lucky.fourier",
+        "luckyao.lucky.ridge",
         "luckyao.photometry",
     ],
     "Study configuration": [
@@ -77,6 +79,7 @@ API_MODULES = {
         "luckyao.steps.lgs_slopes",
         "luckyao.steps.simulation",
         "luckyao.steps.postprocess",
+        "luckyao.steps.learned",
     ],
     "Input and output": ["luckyao.io.datasets", "luckyao.io.fits", "luckyao.io.hashing", "luckyao.io.kinds"],
     "Figures": [

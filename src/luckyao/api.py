@@ -106,7 +106,8 @@ def run_case(study: dict, case, name: str = "explore", workdir=None) -> xr.Datas
     Each step runs in a process of its own, on one thread, as the workflow's: the time loop
     is the ``simulate`` step's, :class:`luckyao.steps.simulation.TimeLoop` (its LGS
     chain measured in the loop: the numbers of the workflow's replayed slopes and LGS twins,
-    ``tests/test_ao_loop.py``)."""
+    ``tests/test_ao_loop.py``). A case with a learned criterion (``ao.learned_training_seed``)
+    runs its training twin and fits the model first, as the workflow does."""
     from .io.hashing import canonical_json
     from .studyspec.view import resolve_study
 
@@ -135,8 +136,9 @@ def run_case(study: dict, case, name: str = "explore", workdir=None) -> xr.Datas
     scratch = workdir is None
     root = Path(tempfile.mkdtemp(prefix="luckyao-") if scratch else workdir)
     root.mkdir(parents=True, exist_ok=True)
-    try:
-        turbulence = view.cases[name].screens
+
+    def screens_of(turbulence) -> list[str]:
+        """The screens' arguments of a step, the screens made first when missing."""
         screens = root / f"{turbulence.key}.npy"
         metadata = screens.with_suffix(".nc")
         if not metadata.exists():
@@ -149,6 +151,10 @@ def run_case(study: dict, case, name: str = "explore", workdir=None) -> xr.Datas
                 "--metadata",
                 str(metadata),
             )
+        return ["--screens", str(screens), "--screens-metadata", str(metadata)]
+
+    try:
+        screens = screens_of(view.cases[name].screens)
         products = []
         for step in ("reconstructor", "commands", "calibration"):
             product = getattr(view.cases[name], step)
@@ -166,16 +172,21 @@ def run_case(study: dict, case, name: str = "explore", workdir=None) -> xr.Datas
             name,
             "--seed",
             str(study["seed"]),
-            "--screens",
-            str(screens),
-            "--screens-metadata",
-            str(metadata),
+            *screens,
             *products,
             "--frames",
             str(frames),
             "--telemetry",
             str(telemetry),
         )
+        learned = []
+        twin = view.cases[name].training
+        if twin is not None:  # the learned criterion, fitted on the case run with another seed
+            training, model = root / name / "training_telemetry.nc", root / name / "learned.nc"
+            arguments = ["--case", canonical_json(resolved), "--name", f"{name}.training", "--seed", str(twin.seed)]
+            _step("simulate", *arguments, *screens_of(twin.screens), *products, "--telemetry", str(training))
+            _step("learn", "--telemetry", str(training), "--out", str(model))
+            learned = ["--learned-model", str(model)]
         _step(
             "lucky",
             "--settings",
@@ -186,10 +197,8 @@ def run_case(study: dict, case, name: str = "explore", workdir=None) -> xr.Datas
             str(telemetry),
             "--out",
             str(lucky),
-            "--screens",
-            str(screens),
-            "--screens-metadata",
-            str(metadata),
+            *screens,
+            *learned,
         )
         return _open(lucky, "lucky")
     finally:

@@ -211,7 +211,23 @@ def cmd_calibration(args) -> None:
 def cmd_lucky(args) -> None:
     from .steps.postprocess import lucky_case
 
-    lucky_case(json.loads(args.settings), args.frames, args.telemetry, args.out, args.screens, args.screens_metadata)
+    lucky_case(
+        json.loads(args.settings),
+        args.frames,
+        args.telemetry,
+        args.out,
+        args.screens,
+        args.screens_metadata,
+        args.learned_model,
+    )
+
+
+def cmd_learn(args) -> None:
+    from .io.datasets import open_dataset, write_dataset
+    from .steps.learned import train_model
+
+    telemetry = open_dataset(args.telemetry, "training telemetry", allow_nan={"axis_strehl"})
+    write_dataset(train_model(telemetry), args.out, compress=False)
 
 
 def cmd_figure(args) -> None:
@@ -435,7 +451,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", required=True)
     p.add_argument("--screens", default="", help="screens, to replay the targets the simulation did not image")
     p.add_argument("--screens-metadata", default="")
+    p.add_argument("--learned-model", default="", help="the case's learned model (ao.learned_training_seed)")
     p.set_defaults(func=cmd_lucky)
+
+    p = sub.add_parser("learn", help="fit the learned criterion on a training twin's telemetry")
+    p.add_argument("--telemetry", required=True, help="the training twin's telemetry.nc")
+    p.add_argument("--out", required=True, help="the model (.nc) to write")
+    p.set_defaults(func=cmd_learn)
 
     p = sub.add_parser("figure", help="draw one figure and write its data")
     p.add_argument("--id", required=True)

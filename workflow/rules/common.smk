@@ -81,6 +81,14 @@ calibration and memory estimate serve the product: they share its LGS chain)."""
 for _name, _product in SLOPES.items():
     if _product is not None:
         SLOPES_CASES.setdefault(_product.key, []).append(_name)
+TRAINING = {name: case.training for name, case in VIEW.cases.items() if case.training is not None}
+"""The training twins of the cases with a learned criterion (ao.learned_training_seed), by case:
+their screens and LGS slopes are made by the rules turbulence and lgs_slopes (the latter with its
+case's calibration: the same instrument)."""
+for _name, _twin in TRAINING.items():
+    TURBULENCE_BY_KEY[_twin.screens.key] = _twin.screens.spec
+    SLOPES_BY_KEY[_twin.slopes.key] = _twin.slopes.spec
+    SLOPES_CASES.setdefault(_twin.slopes.key, []).append(_name)
 # every job on one thread (src/luckyao/threads.py) and marked as a job of the workflow
 # (STUDY_JOB: it holds the study's run lock while it lives and may set a bad input of the
 # study aside); every value formatted into a command is quoted (:q)
@@ -112,6 +120,11 @@ def simulation_calibration(case):
     if LGS_TWIN[case] or (SLOPES[case] and not CASES[case].get("ao", {}).get("residual_budget", False)):
         return []
     return calibration_file(case)
+
+
+def learned_file(case):
+    """The case's learned model (rule learned_model), or [] without ao.learned_training_seed."""
+    return f"results/training/{case}/learned.nc" if case in TRAINING else []
 
 
 def slopes_file(case):
@@ -287,8 +300,11 @@ def simulate_priority(case):
 
 
 def screens_priority(key):
-    """A screens job's scheduling priority: that of the most urgent simulation using them."""
-    return max(simulate_priority(name) for name, screens in TURBULENCE.items() if screens.key == key)
+    """A screens job's scheduling priority: that of the most urgent simulation using them (a
+    training twin's: its case's)."""
+    users = [name for name, screens in TURBULENCE.items() if screens.key == key]
+    users += [name for name, twin in TRAINING.items() if twin.screens.key == key]
+    return max(simulate_priority(name) for name in users)
 
 
 def slopes_priority(key):

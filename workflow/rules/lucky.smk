@@ -4,6 +4,7 @@ rule lucky:
         frames=lambda w: [] if REPLAY_FRAMES else f"results/cases/{w.case}/frames.nc",
         telemetry="results/cases/{case}/telemetry.nc",
         replay=lambda w: replay_screens(w.case),
+        learned=lambda w: learned_file(w.case),
         code=step_sources("luckyao.steps.postprocess"),
     output:
         "results/cases/{case}/lucky.nc",
@@ -22,6 +23,7 @@ rule lucky:
         replay=lambda w, input: (
             ["--screens", input.replay[0], "--screens-metadata", input.replay[1]] if input.replay else []
         ),
+        learned=lambda w, input: ["--learned-model", input.learned] if input.learned else [],
     shell:
         "{LUCKYAO} lucky --settings {params.settings:q} {params.frames:q}"
-        " --telemetry {input.telemetry:q} --out {output:q} {params.replay:q} 2> {log:q}"
+        " --telemetry {input.telemetry:q} --out {output:q} {params.replay:q} {params.learned:q} 2> {log:q}"

@@ -39,7 +39,7 @@ from ..clock import FrameClock, frame_count
 from ..steps.screens import TurbulenceSpec, strip_specs
 from ..studyspec.lucky import registrations
 from ..studyspec.products import commands_spec, reconstructor_spec
-from ..studyspec.resolved import imaged_targets
+from ..studyspec.resolved import criteria_of, imaged_targets
 from ..studyspec.schema import ConfigError
 from ..studyspec.study import validate_study
 from ..studyspec.sweeps import expand_sweeps
@@ -152,17 +152,23 @@ no FFT code; tests/test_registration.py checks it against the layout."""
 MEASURED_FRACTIONS = 9
 """The fractions of ``lucky.fractions`` (the default's) with which a lucky job's sums were measured."""
 
+MEASURED_CRITERIA = 5
+"""The criteria of the AO cases whose lucky jobs' sums were measured (``strehl``, ``d50``, ``lgs_rms``,
+``lgs_residual_rms``, ``true_rms``): every case's at most, but with ``ao.laser_criteria``."""
+
 
 def lucky_memory_bytes(settings: dict) -> float:
     """A case's post-processing (``studyspec.lucky.lucky_settings``): 1.5 GB and, per detector and
     registration method (their sums all held at once: the methods share the passes over the
     frames), 0.21 GB of partial sums of whole frames for a 256-pixel camera (``cog``), or
     :data:`SUBPIXEL_SUMS_FRACTION` of that for a sub-pixel method, for the 9 fractions of
-    ``lucky.fractions`` they were measured with (the sums hold one image per fraction); replaying
+    ``lucky.fractions`` and the at most :data:`MEASURED_CRITERIA` criteria they were measured with
+    (the sums hold one image per fraction and criterion: ``ao.laser_criteria`` adds up to 6); replaying
     the frames (``replay_frames``), the simulation's memory besides (its block of frames, the DM
     commands); Fourier lucky imaging's amplitudes (:func:`fourier_memory_bytes`)."""
     case = settings["case_config"]
     pixels = (case["camera"]["n_pixels"] / 256) ** 2 * len(settings["fractions"]) / MEASURED_FRACTIONS
+    pixels *= max(1.0, len(criteria_of(case)) / MEASURED_CRITERIA)
     methods = sum(1.0 if name == "cog" else SUBPIXEL_SUMS_FRACTION for name in registrations(settings))
     replay = simulate_memory_bytes(case) if settings.get("replay_frames", False) else 0.0
     return 1.5e9 + 0.21e9 * pixels * len(settings["detectors"]) * methods + replay + fourier_memory_bytes(settings)

@@ -13,6 +13,7 @@ import logging
 import numpy as np
 import xarray as xr
 
+from ..ao.laser_criteria import FRAME_CRITERIA, TARGET_CRITERIA
 from ..io.datasets import iter_frame_blocks, open_dataset, provenance, require_finite_lucky, write_dataset
 from ..lucky.accumulation import batch_mean_error
 from ..lucky.dataset import add_noise_flags
@@ -22,6 +23,7 @@ from ..lucky.ranking import ExternalCriterion
 from ..seeds import target_seed
 from ..studyspec.lucky import by_signal
 from ..studyspec.lucky_settings import LuckySettings
+from .learned import learned_rms_nm
 from .screens import read_screens
 from .simulation import Replay
 from .stars import stars_dataset
@@ -31,9 +33,13 @@ log = logging.getLogger(__name__)
 EXTERNAL_CRITERIA = (
     ("lgs_rms", "LGS tomographic (open-loop) tilt-removed rms along the target"),
     ("lgs_residual_rms", "LGS pseudo-closed-loop tilt-removed rms along the target"),
+    *TARGET_CRITERIA,
+    *FRAME_CRITERIA,
 )
-"""Selection criteria from the telemetry (smaller is better), when the case has them; with AO
-also the oracle ``true_rms``, the true corrected tilt-removed rms (a bound, not observable)."""
+"""Selection criteria from the telemetry (smaller is better), when the case has them (the laser
+criteria with ``ao.laser_criteria``); with AO also the oracle ``true_rms``, the true corrected
+tilt-removed rms (a bound, not observable), and with a learned model (``ao.learned_training_seed``)
+``learned``, its prediction (:mod:`.learned`)."""
 
 
 CHUNK_FRAMES = 64
@@ -61,13 +67,24 @@ def _frames_of(
     return iterate, replay
 
 
-def _external_criteria(telemetry: xr.Dataset, target: int) -> list[ExternalCriterion]:
-    """The target's selection criteria from the telemetry (:data:`EXTERNAL_CRITERIA`, and the oracle)."""
+def _external_criteria(telemetry: xr.Dataset, target: int, model: xr.Dataset | None = None) -> list[ExternalCriterion]:
+    """The target's selection criteria from the telemetry (:data:`EXTERNAL_CRITERIA`, the
+    oracle, and with a learned ``model`` its prediction)."""
     external = [
-        ExternalCriterion(name, telemetry[f"{name}_nm"].values[target], False, "nm", long_name)
+        ExternalCriterion(name, _of_target(telemetry[f"{name}_nm"], target), False, "nm", long_name)
         for name, long_name in EXTERNAL_CRITERIA
         if f"{name}_nm" in telemetry
     ]
+    if model is not None:
+        external.append(
+            ExternalCriterion(
+                "learned",
+                learned_rms_nm(model, telemetry, target),
+                False,
+                "nm",
+                f"true rms predicted from the laser telemetry (ridge, trained on seed {model.attrs['training_seed']})",
+            )
+        )
     if "lgs_residual_rms_nm" in telemetry:
         external.append(
             ExternalCriterion(
@@ -81,7 +98,14 @@ def _external_criteria(telemetry: xr.Dataset, target: int) -> list[ExternalCrite
     return external
 
 
-def _lucky_arguments(settings: LuckySettings, telemetry: xr.Dataset, target: int, peak: float) -> dict:
+def _of_target(variable: xr.DataArray, target: int) -> np.ndarray:
+    """A telemetry variable's values (frame,) of a target: its own, or the frame's (no target axis)."""
+    return variable.values[target] if "target" in variable.dims else variable.values
+
+
+def _lucky_arguments(
+    settings: LuckySettings, telemetry: xr.Dataset, target: int, peak: float, model: xr.Dataset | None = None
+) -> dict:
     """A target's :func:`.pipeline.run_lucky_methods` arguments but its frames and references."""
     return dict(
         detectors=settings.detectors,
@@ -89,7 +113,7 @@ def _lucky_arguments(settings: LuckySettings, telemetry: xr.Dataset, target: int
         diffraction_limited_peak=peak,
         pixel_scale_arcsec=settings.case.camera.pixel_scale_arcsec,
         seed=target_seed(settings.seed, target),
-        criteria_external=_external_criteria(telemetry, target),
+        criteria_external=_external_criteria(telemetry, target, model),
         n_blocks=settings.error_blocks,
         image_crop_px=settings.image_crop_px,
         registrations=settings.registration_methods(),
@@ -99,13 +123,21 @@ def _lucky_arguments(settings: LuckySettings, telemetry: xr.Dataset, target: int
 
 
 def lucky_case(
-    settings_config: dict, frames_path, telemetry_path, out_path, screens_path="", screens_metadata_path=""
+    settings_config: dict,
+    frames_path,
+    telemetry_path,
+    out_path,
+    screens_path="",
+    screens_metadata_path="",
+    learned_path="",
 ) -> None:
     """Write one case's ``lucky.nc``; ``settings_config`` from ``studyspec.lucky.lucky_settings``. The
     targets the simulation did not image (:func:`luckyao.studyspec.resolved.imaged_targets`) are replayed
-    from the screens with the recorded DM commands (:class:`.simulation.Replay`)."""
+    from the screens with the recorded DM commands (:class:`.simulation.Replay`). ``learned_path``: the
+    case's learned model (:func:`.learned.train_model`), which gives the criterion ``learned``."""
     settings = LuckySettings.from_settings(settings_config)
     telemetry = open_dataset(telemetry_path, "telemetry", allow_nan={"axis_strehl"})  # NaN: a target not imaged
+    model = open_dataset(learned_path, "learned model", allow_nan=()) if learned_path else None
     n_frames, n_targets = telemetry.sizes["frame"], telemetry.sizes["target"]
     n_blocks, reference = settings.error_blocks, settings.reference_target
     peak = float(telemetry.attrs["diffraction_limited_peak"])
@@ -119,7 +151,7 @@ def lucky_case(
         references = None if reference in (None, target) else [ImageReference.of(ds) for ds in per_target[reference]]
         frames, replay = _frames_of(settings, telemetry, target, frames_path, screens_path, screens_metadata_path)
         per_target[target] = run_lucky_methods(
-            frames, n_frames, references=references, **_lucky_arguments(settings, telemetry, target, peak)
+            frames, n_frames, references=references, **_lucky_arguments(settings, telemetry, target, peak, model)
         )
         if replay is not None:
             axis_strehl[target] = replay.axis_strehl[0]
@@ -152,7 +184,7 @@ def lucky_case(
             return _frames_of(settings, telemetry, target, frames_path, screens_path, screens_metadata_path)[0]
 
         science = settings.case_config["stars"]["science_target"]
-        arguments = _lucky_arguments(settings, telemetry, science, peak)
+        arguments = _lucky_arguments(settings, telemetry, science, peak, model)
         ds = ds.merge(stars_dataset(settings, telemetry, per_target, frames_of, arguments))
     add_noise_flags(ds)  # where a noisy detector's scores are noise-dominated
     fwhm_dl, d50_dl = settings.diffraction_limited_scores()
@@ -191,7 +223,8 @@ def lucky_case(
             f"from {n_blocks} batch means",
         },
     )
-    for name in ("true_rms_nm", "lgs_rms_nm", "lgs_residual_rms_nm", "transmitted_flux"):
+    laser = [f"{name}_nm" for name, _ in TARGET_CRITERIA + FRAME_CRITERIA]
+    for name in ("true_rms_nm", "lgs_rms_nm", "lgs_residual_rms_nm", "transmitted_flux", *laser):
         if name in telemetry:
             ds[name] = telemetry[name]
     for name in telemetry.data_vars:  # the residual budget's parts (ao.residual_budget)

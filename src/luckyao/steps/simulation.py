@@ -21,7 +21,9 @@ import xarray as xr
 
 from ..ao.apodisation import Apodiser, DelayedApodisation, SubapertureRegions
 from ..ao.budget import PARTS, ResidualBudget, telemetry_variables
+from ..ao.control import ground_layers
 from ..ao.correction import DelayedDm, OpenLoopCorrection
+from ..ao.laser_criteria import FRAME_CRITERIA, TARGET_CRITERIA, LaserCriteria
 from ..atmosphere.screens import ScreenSet
 from ..io.datasets import open_dataset, require_finite
 from ..optics.imaging import Imager
@@ -31,7 +33,8 @@ from ..progress import Progress
 from ..studyspec.case import Case
 from ..studyspec.products import lgs_spec
 from ..tomography.criterion import LgsRmsEstimator, lucky_frame_rms_nm
-from ..tomography.reconstructor import reconstruction_points
+from ..tomography.reconstructor import factorize, reconstruction_points, target_reconstructor
+from ..tomography.slopes import SlopeGeometry, slope_covariance
 from ..units import ARCSEC_RAD, REFERENCE_WAVELENGTH_M, phase_rad_to_nm
 from ..wfs.sensor import LgsSensor
 from .lgs_slopes import lgs_sensor
@@ -44,6 +47,38 @@ def lgs_chain(
     (target, point, slope))."""
     sensor = lgs_sensor(case, screens, seed, calibration)
     return sensor, LgsRmsEstimator(reconstructors, sensor.n_slopes)
+
+
+def laser_criteria_of(case: Case, reconstructors: np.ndarray) -> LaserCriteria:
+    """The laser-only criteria (:mod:`luckyao.ao.laser_criteria`) of an AO case whose targets'
+    reconstructors (target, point, slope) are ``reconstructors``: its reconstructors restricted
+    to the ground and the altitude layers built here (a factorisation of the slope covariance,
+    seconds for the default WFS)."""
+    wfs, tomography = case.shack_hartmann(), case.tomography
+    prior, noise_rad = tomography.prior, tomography.noise_rms_rad
+    geometry = SlopeGeometry.from_wfs(wfs, case.lgs)
+    points = reconstruction_points(case.telescope, wfs.subaperture_m, tomography.points_per_subaperture)
+    cholesky = factorize(slope_covariance(prior, geometry, noise_rad))
+    ground = ground_layers(prior, case.ao.glao_max_height_m)
+    altitude = [i for i in range(len(prior.heights_m)) if i not in ground]
+    layers = [
+        [
+            target_reconstructor(
+                prior,
+                geometry,
+                noise_rad,
+                points,
+                (t.theta_x_rad, t.theta_y_rad),
+                layer_indices=indices,
+                cholesky_lower=cholesky,
+            )
+            for t in case.targets
+        ]
+        for indices in (ground, altitude)
+    ]
+    dm = case.ao.deformable_mirror(case.telescope)
+    influence = dm.influence_matrix(points[:, 0], points[:, 1])
+    return LaserCriteria(reconstructors, layers, influence, dm.fit_matrix(points), points, wfs.subaperture_m)
 
 
 def twin_lgs_rms_nm(path, config: dict, seed: int) -> np.ndarray:
@@ -168,6 +203,7 @@ def simulate(
     block_frames: int = 32,
     lgs_rms_nm: np.ndarray | None = None,
     budget_sensor: LgsSensor | None = None,
+    laser: LaserCriteria | None = None,
 ) -> xr.Dataset:
     """Run the case; ``write_frames(start, frames (imaged target, k, n, n))`` receives the
     noiseless unit-flux frames of ``imaged_targets`` (indices into ``case.targets``,
@@ -182,7 +218,9 @@ def simulate(
     exposure's DM commands are recorded (``dm_commands_m``), so that the science path
     of the targets not imaged can be replayed (:class:`Replay`). With AO and a
     ``budget_sensor`` (the LGS sensor's twin without noise) each frame also gets the
-    residual budget of the first target (:mod:`luckyao.ao.budget`).
+    residual budget of the first target (:mod:`luckyao.ao.budget`); with AO and ``laser``
+    (:func:`laser_criteria_of`) each frame also gets the laser-only criteria
+    (:mod:`luckyao.ao.laser_criteria`).
 
     Per frame it records the truth (tilt-removed rms) and the imaged targets' frame
     value on the optical axis over the diffraction-limited peak, whose mean over frames
@@ -223,6 +261,11 @@ def simulate(
         )
         budget_rms_nm = np.empty((len(PARTS), n_frames))
         budget_cross_nm2 = np.empty(n_frames)
+    if laser is not None:
+        if correction is None or sensor is None:
+            raise ValueError("the laser criteria need AO and the LGS sensor (or its recorded slopes)")
+        laser_target_nm = np.empty((len(TARGET_CRITERIA), n_targets, n_frames), dtype=np.float32)
+        laser_frame_nm = np.empty((len(FRAME_CRITERIA), n_frames), dtype=np.float32)
     steps_max = science.propagator.n_steps_max
     if sensor is not None:
         steps_max = min(steps_max, sensor.n_steps_max)
@@ -280,6 +323,10 @@ def simulate(
                         [correction.residual_slopes(int(s), exposure) for s, exposure in zip(starts, slopes)]
                     )
                     lgs_residual_rms[:, frame] = lucky_frame_rms_nm(estimator.rms_nm(residual))
+                    if laser is not None:
+                        laser_target_nm[:, :, frame], laser_frame_nm[:, frame] = laser.frame(
+                            slopes, dm_commands[clock.frame_exposures(frame)]
+                        )
             buffer[:, j], axis_strehl[imaged, frame], rms = science.frame(
                 frame, steps, layer_scales, correction, apodisation=apodisation, budget=budget
             )
@@ -327,6 +374,11 @@ def simulate(
             )
         if budget is not None:
             extra.update(telemetry_variables(budget_rms_nm, budget_cross_nm2))
+        if laser is not None:
+            for (name, long_name), values in zip(TARGET_CRITERIA, laser_target_nm):
+                extra[f"{name}_nm"] = (("target", "frame"), values, {"units": "nm", "long_name": long_name})
+            for (name, long_name), values in zip(FRAME_CRITERIA, laser_frame_nm):
+                extra[f"{name}_nm"] = (("frame",), values, {"units": "nm", "long_name": long_name})
         extra["dm_commands_m"] = (
             ("exposure", "actuator"),
             dm_commands,
@@ -398,7 +450,9 @@ class TimeLoop:
     in the loop with ``seed`` and the WFS ``calibration`` (:func:`lgs_chain`); its estimator from
     ``reconstructors``. Without either, none: a no-AO case may be given its twin's ``lgs_rms_nm``
     (target, frame) (:func:`twin_lgs_rms_nm`). ``commands`` (the command matrix and the DM
-    slopes) with AO; ``imaged_targets`` as :func:`simulate`'s. Built here (the sensor's set-up
+    slopes) with AO; ``imaged_targets`` as :func:`simulate`'s. With ``ao.residual_budget`` the
+    budget's noiseless sensor, with ``ao.laser_criteria`` the laser criteria
+    (:func:`laser_criteria_of`). Built here (the sensor's set-up
     takes seconds, which a benchmark leaves out of its timing); :meth:`run` runs it once.
     """
 
@@ -426,6 +480,9 @@ class TimeLoop:
         if case.ao is not None and case.ao.residual_budget:
             noiseless = dataclasses.replace(case, wfs=dataclasses.replace(case.wfs, photons_per_subaperture=None))
             self.budget_sensor = lgs_sensor(noiseless, screens, seed, calibration)
+        self.laser = None
+        if case.ao is not None and case.ao.laser_criteria:
+            self.laser = laser_criteria_of(case, reconstructors)
 
     def run(self, write_frames) -> xr.Dataset:
         """:func:`simulate` of the case (``write_frames`` as there): its telemetry."""
@@ -439,6 +496,7 @@ class TimeLoop:
             self.imaged_targets,
             lgs_rms_nm=self.lgs_rms_nm,
             budget_sensor=self.budget_sensor,
+            laser=self.laser,
         )
 
 

@@ -72,8 +72,8 @@ class TomographySettings:
 
 @dataclass(frozen=True)
 class AoSettings:
-    """Open-loop AO: ``mode`` none / ltao / glao, the DM, the delay, what is corrected and
-    whether the residual is budgeted."""
+    """Open-loop AO: ``mode`` none / ltao / glao, the DM, the delay, what is corrected, whether
+    the residual is budgeted and which laser-only criteria are recorded."""
 
     mode: str
     n_actuators: int
@@ -84,7 +84,11 @@ class AoSettings:
     glao_max_height_m: float
     residual_budget: bool
     """Split the true residual along the first target into its parts (:mod:`luckyao.ao.budget`)."""
+    laser_criteria: bool = False
+    """Record the laser-only selection criteria (:mod:`luckyao.ao.laser_criteria`)."""
     apodisation: ApodisationSettings | None = None
+    learned_training_seed: int | None = None
+    """Seed of the training twin whose telemetry fits the ``learned`` criterion (:mod:`luckyao.steps.learned`)."""
 
     @property
     def enabled(self) -> bool:

@@ -64,7 +64,7 @@ def commands_spec(case: dict) -> dict | None:
     targets or the atmosphere, so cases that differ only there share it."""
     if case["ao"]["mode"] == "none":
         return None
-    not_in_commands = ("apodisation", "residual_budget")
+    not_in_commands = ("apodisation", "residual_budget", "laser_criteria", "learned_training_seed")
     ao = {key: value for key, value in case["ao"].items() if key not in not_in_commands}
     return {**{key: case[key] for key in ("telescope", "lgs", "wfs", "tomography")}, "ao": ao}
 

@@ -13,10 +13,17 @@ def imaged_targets(case: dict) -> list[int]:
 
 def criteria_of(case: dict) -> set[str]:
     """Selection criteria a resolved case gives: image criteria always, ``lgs_rms`` with
-    LGS, ``lgs_residual_rms`` and the oracle ``true_rms`` with AO."""
+    LGS, ``lgs_residual_rms`` and the oracle ``true_rms`` with AO, the laser-only criteria
+    with ``ao.laser_criteria`` and ``learned`` with ``ao.learned_training_seed``."""
     criteria = {"strehl", "d50"}
     if case["lgs"]["enabled"]:
         criteria.add("lgs_rms")
     if case["ao"]["mode"] != "none":
         criteria |= {"lgs_residual_rms", "true_rms"}
+    if case["ao"].get("laser_criteria"):
+        from ..ao.laser_criteria import FRAME_CRITERIA, TARGET_CRITERIA  # numba: only for the cases asking
+
+        criteria |= {name for name, _ in TARGET_CRITERIA + FRAME_CRITERIA}
+    if "learned_training_seed" in case["ao"]:
+        criteria.add("learned")
     return criteria

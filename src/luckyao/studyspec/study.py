@@ -72,6 +72,15 @@ def _check_case(name: str, case: dict, turbulence: dict) -> None:
         raise ConfigError(
             f"config key '{where}.ao.residual_budget': needs ao.mode ltao or glao (it splits the AO residual)"
         )
+    if case["ao"].get("laser_criteria") and case["ao"]["mode"] == "none":
+        raise ConfigError(
+            f"config key '{where}.ao.laser_criteria': needs ao.mode ltao or glao (the criteria use the DM's "
+            "fit and commands)"
+        )
+    if "learned_training_seed" in case["ao"] and not case["ao"].get("laser_criteria"):
+        raise ConfigError(
+            f"config key '{where}.ao.learned_training_seed': needs ao.laser_criteria: true (its features)"
+        )
     if case["telescope"]["obscuration_m"] >= case["telescope"]["diameter_m"]:
         raise ConfigError(f"config key '{where}.telescope.obscuration_m': must be below diameter_m")
     reference = case.get("reference_target")
@@ -151,6 +160,12 @@ def validate_study(config: dict, schema: dict | None = None) -> dict:
             continue
         cases[name] = resolved
     problems += _replay_problems(config, cases)
+    problems += [
+        f"config key 'cases.{name}.ao.learned_training_seed': {config['seed']} is the study's seed: the "
+        "learned criterion must be trained on another seed's run than the one it is scored on"
+        for name, case in cases.items()
+        if case["ao"].get("learned_training_seed") == config["seed"]
+    ]
     problems += _fourier_problems(config, cases)
     if not any(d["photons_per_frame"] is None for d in config["lucky"]["detectors"].values()):
         problems += [

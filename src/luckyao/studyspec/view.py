@@ -91,6 +91,27 @@ def _product(kind: type[Product], spec: dict | None) -> Product | None:
 
 
 @dataclass(frozen=True, eq=False)
+class TrainingTwin:
+    """The run that trains a case's ``learned`` criterion (``ao.learned_training_seed``): the same
+    case with the training seed, so its own screens and LGS slopes; its reconstructor, command
+    matrix and WFS calibration are the case's (the same instrument)."""
+
+    seed: int
+    screens: Screens
+    slopes: Slopes
+
+
+def _training_twin(study: dict, case: dict, duration_s: float) -> TrainingTwin | None:
+    """A case's :class:`TrainingTwin`, or None without ``ao.learned_training_seed``."""
+    seed = case["ao"].get("learned_training_seed")
+    if seed is None:
+        return None
+    twin_study = {**study, "seed": seed}
+    screens = turbulence_spec(twin_study, case, duration_s)
+    return TrainingTwin(seed, Screens(screens), Slopes(slopes_spec(twin_study, case, screens)))
+
+
+@dataclass(frozen=True, eq=False)
 class ResolvedCase:
     """One case, resolved: its config, what it derived and changed, its products and settings."""
 
@@ -110,6 +131,8 @@ class ResolvedCase:
     """The AO case whose simulation measures this no-AO case's LGS telemetry (``products.lgs_twin``)."""
     lucky_settings: dict
     """Its lucky job's settings (``studyspec.lucky.lucky_settings``)."""
+    training: TrainingTwin | None = None
+    """The run that trains its ``learned`` criterion (``ao.learned_training_seed``), or None."""
 
     @property
     def detectors(self) -> tuple[str, ...]:
@@ -189,5 +212,6 @@ def resolve_study(study: dict, configs: dict) -> ResolvedStudy:
             slopes=_product(Slopes, slopes_spec(study, case, screens[name])),
             lgs_twin=lgs_twin(study, configs, name, screens),
             lucky_settings=lucky_settings(study, configs, name),
+            training=_training_twin(study, case, durations[name]),
         )
     return ResolvedStudy(study, cases)
