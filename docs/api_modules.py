@@ -8,7 +8,7 @@ Written against the package layout of issue 39 (``studyspec/``, ``steps/``, ``io
 
 API_MODULES = {
     "The Python interface": ["luckyao.api", "luckyao.version"],
-    "Atmosphere": ["luckyao.atmosphere.statistics", "luckyao.atmosphere.screens"],
+    "Atmosphere": ["luckyao.atmosphere.statistics", "luckyao.atmosphere.screens", "luckyao.atmosphere.intermittency"],
     "Geometry, seeds and units": ["luckyao.geometry", "luckyao.seeds", "luckyao.units"],
     "Optics": [
         "luckyao.optics.pupil",

@@ -48,6 +48,12 @@ SECTIONS = [
     ),
     ("base.telescope", "base.telescope", ("definitions", "case", "properties", "telescope"), None),
     ("base.atmosphere", "base.atmosphere", ("definitions", "case", "properties", "atmosphere"), None),
+    (
+        "base.atmosphere.layer_variability",
+        "base.atmosphere.layer_variability",
+        ("definitions", "case", "properties", "atmosphere", "properties", "layer_variability"),
+        None,
+    ),
     ("base.camera", "base.camera", ("definitions", "case", "properties", "camera"), None),
     ("base.ao", "base.ao", ("definitions", "case", "properties", "ao"), None),
     (
@@ -79,6 +85,7 @@ NESTED = {
     "cases": "cases",
     "base.telescope": "base.telescope",
     "base.atmosphere": "base.atmosphere",
+    "base.atmosphere.layer_variability": "base.atmosphere.layer_variability",
     "base.camera": "base.camera",
     "base.ao": "base.ao",
     "base.ao.apodisation": "base.ao.apodisation",

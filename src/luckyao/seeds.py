@@ -7,6 +7,9 @@
   the streams differ by a nonzero word, not by their length).
 * WFS calibration (the turbulence draws of its dithers): ``default_rng([seed,
   CALIBRATION_STREAM])`` (:func:`calibration_rng`); the layer indices stay below its tag.
+* Layer strengths in time (``atmosphere.layer_variability``): layer ``i``'s log-normal process
+  draws from ``default_rng([seed, LAYER_STRENGTH_STREAM, i])`` (:func:`layer_strength_rng`),
+  ``seed`` the block's own (by default the study's).
 * Lucky-camera detector noise: target ``t`` of a case uses the seed ``seed + t``
   (:func:`target_seed`), and frame ``f`` of detector ``name`` draws from compiled streams keyed
   by ``(seed + t, detector_key(name), f)``: the three words are this module's, the
@@ -44,6 +47,15 @@ def wfs_noise_rng(seed: int) -> np.random.Generator:
 def calibration_rng(seed: int) -> np.random.Generator:
     """The generator of the WFS calibration's turbulence draws."""
     return np.random.default_rng([seed, CALIBRATION_STREAM])
+
+
+LAYER_STRENGTH_STREAM = 0xFFFF_FFFD
+"""Second entropy word of the layer-strength streams (differs from every other stream's)."""
+
+
+def layer_strength_rng(seed: int, layer: int) -> np.random.Generator:
+    """The generator of layer ``layer``'s strength in time (:mod:`luckyao.atmosphere.intermittency`)."""
+    return np.random.default_rng([seed, LAYER_STRENGTH_STREAM, layer])
 
 
 EMCCD_STREAM = 0xFFFF_FFFE

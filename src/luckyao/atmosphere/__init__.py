@@ -1,4 +1,4 @@
-"""Layered frozen-flow von Karman turbulence: its statistics and its phase screens."""
+"""Layered frozen-flow von Karman turbulence: its statistics, its phase screens and its layers' strengths in time."""
 
 from ..exports import lazy_exports
 
@@ -12,6 +12,7 @@ EXPORTS = {
         "r0_at_wavelength",
     ),
     "screens": ("StripSpec", "strip_spec", "strip_screen", "ScreenSet"),
+    "intermittency": ("LayerVariability",),
 }
 """Public objects, by module (imported on first use: :mod:`luckyao.exports`)."""
 

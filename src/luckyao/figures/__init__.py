@@ -14,7 +14,7 @@ limiting_magnitude; more_stars: more_stars; signal:
 quality_vs_signal; wavefront: asterism, rms_truth, residuals; tables:
 long_exposure_check, long_exposure_table, long_exposure_markdown, value_with_error;
 gallery: psf_gallery; fourier: fourier (Fourier lucky imaging against shift-and-add); budget:
-residual_budget.
+residual_budget; selection: selection_power (the share of the oracle's lucky gain each criterion recovers).
 """
 
 import base64
@@ -42,6 +42,7 @@ from .quality import (
     quality_vs_parameter_data,
 )
 from .registration import draw_registration, registration_data
+from .selection import draw_selection_power, selection_power_data
 from .settings import CaseSummary, FigureSettings
 from .signal import draw_quality_vs_signal, quality_vs_signal_data
 from .style import DPI
@@ -75,6 +76,7 @@ FIGURE_KINDS = {
     "fourier": (fourier_data, draw_fourier),
     "more_stars": (more_stars_data, draw_more_stars),
     "residual_budget": (residual_budget_data, draw_residual_budget),
+    "selection_power": (selection_power_data, draw_selection_power),
 }
 
 REGISTRATION_KINDS = ("registration", "quality_vs_signal", "limiting_magnitude", "fourier", "more_stars")

@@ -11,6 +11,9 @@ SUMMARISED = {
     "telescope.diameter_m",
     "atmosphere.r0_500nm_m",
     "atmosphere.r0_amplitude_m",
+    "atmosphere.layer_variability.sigma_ln",
+    "atmosphere.layer_variability.correlation_time_s",
+    "atmosphere.layer_variability.seed",
     "wfs.n_subapertures",
     "lgs.enabled",
     "lgs.n_beacons",
@@ -36,6 +39,8 @@ class CaseSummary:
     n_beacons: int | None = None
     others: tuple[str, ...] = ()
     """``key value`` of every other key the case sets apart from the base (:data:`SUMMARISED` aside)."""
+    layers_vary: bool = False
+    """Each layer's strength varies in time (``atmosphere.layer_variability``: intermittent turbulence)."""
 
     @classmethod
     def of(cls, name: str, case: Case, differences: dict | None = None) -> "CaseSummary":
@@ -55,12 +60,14 @@ class CaseSummary:
             diameter_m=case.telescope.diameter_m,
             n_beacons=case.lgs.n_beacons if case.lgs else None,
             others=others,
+            layers_vary=case.layer_variability is not None,
         )
 
     def parts(self) -> dict[str, str]:
         """Short descriptions by aspect, e.g. ``{"ao": "LTAO", "r0": "r0 13.5 cm", ...}``."""
         ao = {"none": "no AO"}.get(self.ao_mode, self.ao_mode.upper())
         r0 = f"r0 {self.r0_cm:g} cm" + (" (varying)" if self.r0_varies else "")
+        r0 += " (intermittent layers)" if self.layers_vary else ""
         parts = {"ao": ao, "telescope": f"{self.diameter_m:g} m", "r0": r0}
         if self.wfs_subapertures:
             parts["wfs"] = f"{self.wfs_subapertures}x{self.wfs_subapertures} WFS"

@@ -335,7 +335,7 @@ def simulate(
             if apodisation is not None:
                 transmitted[frame] = science.transmitted_flux
             true_rms_nm[:, frame] = phase_rad_to_nm(rms, REFERENCE_WAVELENGTH_M)
-            r0_frame[frame] = np.mean(case.r0.r0_m(steps * case.time_step_s))
+            r0_frame[frame] = np.mean(case.r0_m(steps))
         write_frames(start, buffer[:, :count])
         progress.update(start + count)
 

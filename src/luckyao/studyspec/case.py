@@ -6,12 +6,14 @@ config (``studyspec.study.validate_study``); the rest of the package takes these
 objects, never dicts.
 """
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
 
 from ..ao.apodisation import ApodisationSettings
 from ..ao.dm import DeformableMirror
+from ..atmosphere.intermittency import LayerVariability
 from ..atmosphere.statistics import Layer, R0Schedule
 from ..clock import FrameClock, frame_count, steps_per_frame
 from ..geometry import LineOfSight
@@ -175,6 +177,8 @@ class Case:
     """None for an LGS chain alone (``studyspec.products.lgs_chain_config``: no targets either)."""
     seeing: BeaconSeeing | None = None
     """The turbulence as the beacons see it at the mean r0 (the seeing the WFS calibration assumes)."""
+    layer_variability: LayerVariability | None = None
+    """Each layer's strength in time (intermittent turbulence), or None: constant."""
 
     @classmethod
     def from_config(cls, case: dict) -> "Case":
@@ -198,17 +202,38 @@ class Case:
             tomography=tomography_from(case["tomography"]),
             ao=ao_from(case["ao"]) if "ao" in case else None,
             seeing=seeing_from(atm, lgs_from(case["lgs"])) if case["lgs"]["enabled"] else None,
+            layer_variability=LayerVariability(**atm["layer_variability"]) if "layer_variability" in atm else None,
         )
 
     def layer_scales(self, steps) -> np.ndarray:
         """Per-layer factors (k, n_layers) from the normalised screens to rad at
-        500 nm at the k time ``steps``."""
+        500 nm at the k time ``steps``: ``r0(t)^-5/6 sqrt(Cn2 fraction)``, times
+        ``sqrt(c_l(t))`` with layer variability (:attr:`cn2_factors`). Everything that
+        samples the screens (science path, LGS sensor, residual budget) takes these."""
         r0 = self.r0.r0_m(np.asarray(steps) * self.time_step_s).reshape(-1, 1)
-        return r0 ** (-5 / 6) * np.sqrt([layer.cn2_fraction for layer in self.layers])
+        scales = r0 ** (-5 / 6) * np.sqrt([layer.cn2_fraction for layer in self.layers])
+        if self.layer_variability is None:
+            return scales
+        return scales * np.sqrt(self.cn2_factors[np.asarray(steps)])
+
+    @functools.cached_property
+    def cn2_factors(self) -> np.ndarray:
+        """Each layer's Cn2 factor (n_steps, n_layers) at every time step of the case
+        (:class:`luckyao.atmosphere.intermittency.LayerVariability`; the case must have it)."""
+        return self.layer_variability.cn2_factors(len(self.layers), self.clock.n_steps, self.time_step_s)
+
+    def r0_m(self, steps) -> np.ndarray:
+        """r0 at 500 nm [m] of the whole profile at the time ``steps``: the sinusoid's, and with
+        layer variability ``r0(t) (sum_l f_l c_l(t))^(-3/5)`` (``f_l`` the Cn2 fractions)."""
+        r0 = self.r0.r0_m(np.asarray(steps) * self.time_step_s)
+        if self.layer_variability is None:
+            return r0
+        fractions = np.array([layer.cn2_fraction for layer in self.layers])
+        return r0 * (self.cn2_factors[np.asarray(steps)] @ fractions / fractions.sum()) ** (-3 / 5)
 
     def r0_samples_m(self) -> np.ndarray:
-        """r0 at 500 nm [m] at every time step of the case."""
-        return self.r0.r0_m(np.arange(self.clock.n_steps) * self.time_step_s)
+        """r0 at 500 nm [m] at every time step of the case (:meth:`r0_m`)."""
+        return self.r0_m(np.arange(self.clock.n_steps))
 
     @property
     def clock(self) -> FrameClock:

@@ -21,6 +21,10 @@ Besides the size, :func:`derived_case` gives a case that leaves out
 follows the case's seeing unless the case pins it (``studyspec.study.plausibility_warnings``
 names a pinned prior that differs).
 
+A case with ``atmosphere.layer_variability`` (intermittent turbulence) gets that block's left-out
+keys from the schema and its ``seed`` from the study's (:func:`seeded_case`), so the resolved
+config alone gives its layers' strengths in time (``studyspec.case.Case``).
+
 The turbulence strips are at least ``turbulence.min_across_diameters`` diameters wide across the
 wind (:func:`screen_min_across_m`). Writing a derived key together with the parameter it would
 be derived from (``wfs.n_subapertures`` with ``telescope.subaperture_pitch_m``) is refused by key.
@@ -31,7 +35,7 @@ import math
 
 from ..optics.pupil import Telescope
 from ..units import ARCSEC_RAD
-from .schema import ConfigError, case_defaults
+from .schema import ConfigError, case_defaults, load_schema
 
 DERIVED_KEYS = {
     "telescope.obscuration_m": "telescope.obscuration_ratio",
@@ -133,6 +137,20 @@ def derived_case(case: dict, where: str) -> dict:
     (:data:`PRIOR_KEY`) the case's mean r0 when left out."""
     out = derive_size_defaults(case, where)
     out["tomography"].setdefault("prior_r0_500nm_m", out["atmosphere"]["r0_500nm_m"])
+    return out
+
+
+def seeded_case(case: dict, seed: int) -> dict:
+    """A resolved case whose ``atmosphere.layer_variability``, if any, holds every key: the
+    schema's defaults for those left out, and the study's ``seed`` unless it gives one
+    (the case unchanged without the block: no other case's config or hash moves)."""
+    atm = case["atmosphere"]
+    if "layer_variability" not in atm:
+        return case
+    out = copy.deepcopy(case)
+    keys = load_schema()["definitions"]["case"]["properties"]["atmosphere"]["properties"]["layer_variability"]
+    defaults = {key: spec["default"] for key, spec in keys["properties"].items() if "default" in spec}
+    out["atmosphere"]["layer_variability"] = {**defaults, "seed": seed, **atm["layer_variability"]}
     return out
 
 

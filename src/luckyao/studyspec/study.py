@@ -16,7 +16,7 @@ from .lucky import (
     sweep_detector_list,
 )
 from .resolved import criteria_of
-from .scaling import PRIOR_KEY, derived_case
+from .scaling import PRIOR_KEY, derived_case, seeded_case
 from .schema import ConfigError, check_finite, deep_merge, load_schema, validate_keys
 from .sweeps import expand_sweeps
 from .yamlfile import read_config_file
@@ -146,7 +146,7 @@ def validate_study(config: dict, schema: dict | None = None) -> dict:
         resolved = deep_merge(config["base"], override)
         try:
             validate_keys(resolved, case_schema, f"cases.{name}")
-            resolved = derived_case(resolved, f"cases.{name}")
+            resolved = seeded_case(derived_case(resolved, f"cases.{name}"), config["seed"])
             _check_case(name, resolved, config["turbulence"])
             n_frames = frame_count(resolved)
             blocks = error_blocks(config["lucky"])
@@ -213,6 +213,20 @@ def _check_fourier_figure(fig_id: str, figure: dict, config: dict) -> None:
     if missing:
         raise ConfigError(
             f"config key 'figures.{fig_id}.read_noise_e': {sorted(missing)} not in lucky.detector_sweep.read_noise_e"
+        )
+
+
+def _check_selection_power(fig_id: str, figure: dict, cases: dict, config: dict) -> None:
+    """A selection_power figure's cases have the oracle (AO), and every frame is a fraction (S_all)."""
+    for case in figure["cases"]:
+        if case in cases and "true_rms" not in criteria_of(cases[case]):
+            raise ConfigError(
+                f"config key 'figures.{fig_id}.cases': case '{case}' has no oracle (true_rms: needs ao.mode ltao "
+                "or glao), against whose lucky gain selection_power measures every criterion"
+            )
+    if 1.0 not in config["lucky"]["fractions"]:
+        raise ConfigError(
+            f"config key 'lucky.fractions': the selection_power figure '{fig_id}' needs 1.0 (every frame, S_all)"
         )
 
 
@@ -297,6 +311,7 @@ def _check_figure(fig_id: str, figure: dict, cases: dict, config: dict) -> None:
         "quality_vs_diameter": ("criteria", "fractions"),
         "limiting_magnitude": ("criteria", "fractions"),
         "fourier": ("criteria", "fractions"),
+        "selection_power": ("fractions",),
     }
     for key in needs.get(figure["kind"], ()):
         if key not in figure:
@@ -344,6 +359,8 @@ def _check_figure(fig_id: str, figure: dict, cases: dict, config: dict) -> None:
                     f"config key 'figures.{fig_id}.cases': case '{case}' has no residual budget "
                     "(ao.residual_budget: true)"
                 )
+    if figure["kind"] == "selection_power":
+        _check_selection_power(fig_id, figure, cases, config)
     if figure["kind"] == "more_stars":
         for case in figure["cases"]:
             if case in cases and "stars" not in cases[case]:
