@@ -127,7 +127,9 @@ case "$command" in
     test)
         setup
         lint
-        exec "$VENV/bin/python" -m pytest "$@"
+        # the test files shared out over LUCKYAO_TEST_WORKERS processes (2: CI's cores), each
+        # file's tests in one process (its module fixtures, the tiny studies, made once)
+        exec "$VENV/bin/python" -m pytest -n "${LUCKYAO_TEST_WORKERS:-2}" --dist loadfile "$@"
         ;;
     lint)
         setup

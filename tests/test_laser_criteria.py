@@ -21,6 +21,7 @@ from luckyao.jobs.resources import lucky_memory_bytes
 from luckyao.lucky.ridge import LAMBDAS, cross_validated_ridge, fit_ridge
 from luckyao.optics.pupil import TiltRemover
 from luckyao.steps.learned import FEATURES, learned_rms_nm, train_model
+from luckyao.studyspec.case import Case
 from luckyao.studyspec.products import (
     commands_key,
     commands_spec,
@@ -183,6 +184,30 @@ def test_learned_criterion_is_trained_and_scored_on_other_seeds():
         learned_rms_nm(model, _telemetry(config, 7), 0)
     with pytest.raises(ValueError, match="another case"):
         learned_rms_nm(model, _telemetry(deep_merge(config, {"duration_s": 5.0}), 2014), 0)
+
+
+def test_an_intermittent_case_trains_on_its_own_layer_strengths():
+    """With intermittent layers the training twin draws the layers' strengths from the training
+    seed too (no turbulence history of the scored frames is seen in training), and its model
+    scores the case's telemetry."""
+    study = deep_merge(
+        _study(laser_criteria=True, learned_training_seed=7),
+        {"cases": {"ltao_r0_13.5cm": {"atmosphere": {"layer_variability": {"correlation_time_s": 10.0}}}}},
+    )
+    view = resolve_study(study, validate_study(study))
+    case = view.cases["ltao_r0_13.5cm"]
+    twin = case.training.config
+    assert case.config["atmosphere"]["layer_variability"]["seed"] == study["seed"]
+    assert twin["atmosphere"]["layer_variability"]["seed"] == 7
+    steps = np.arange(4000)
+    assert not np.allclose(
+        Case.from_config(twin).layer_scales(steps), Case.from_config(case.config).layer_scales(steps)
+    )
+    model = train_model(_telemetry(twin, 7))
+    scored = _telemetry(case.config, study["seed"])
+    np.testing.assert_allclose(learned_rms_nm(model, scored, 0), scored["true_rms_nm"].values[0], rtol=1e-3)
+    with pytest.raises(ValueError, match="another case"):
+        learned_rms_nm(train_model(_telemetry(case.config, 7)), scored, 0)
 
 
 def _study(**ao):

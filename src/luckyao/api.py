@@ -183,7 +183,7 @@ def run_case(study: dict, case, name: str = "explore", workdir=None) -> xr.Datas
         twin = view.cases[name].training
         if twin is not None:  # the learned criterion, fitted on the case run with another seed
             training, model = root / name / "training_telemetry.nc", root / name / "learned.nc"
-            arguments = ["--case", canonical_json(resolved), "--name", f"{name}.training", "--seed", str(twin.seed)]
+            arguments = ["--case", canonical_json(twin.config), "--name", f"{name}.training", "--seed", str(twin.seed)]
             _step("simulate", *arguments, *screens_of(twin.screens), *products, "--telemetry", str(training))
             _step("learn", "--telemetry", str(training), "--out", str(model))
             learned = ["--learned-model", str(model)]

@@ -1,6 +1,6 @@
 rule simulate_training:
     """A case's training twin (ao.learned_training_seed): its time loop with the training seed,
-    on its own screens and LGS slopes, imaging nothing: the telemetry its learned criterion
+    on its own screens, LGS slopes and layer strengths, imaging nothing: the telemetry its learned criterion
     is fitted on (no frame the criterion scores is seen in training)."""
     input:
         screens=lambda w: TRAINING[w.case].screens.samples_path,
@@ -22,7 +22,7 @@ rule simulate_training:
         mem_mb=lambda w: mem_mb(simulate_memory_bytes(CASES[w.case]), 4000),
         runtime=lambda w: simulate_minutes(CASES[w.case]),  # an upper bound: it images nothing
     params:
-        case=lambda w: canonical_json(CASES[w.case]),
+        case=lambda w: canonical_json(TRAINING[w.case].config),
         seed=lambda w: TRAINING[w.case].seed,
         calibration=lambda w, input: ["--calibration", input.calibration] if input.calibration else [],
     shell:

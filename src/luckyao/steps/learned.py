@@ -17,8 +17,10 @@ import xarray as xr
 from ..ao.budget import first_corrected_frame
 from ..ao.laser_criteria import FRAME_CRITERIA, TARGET_CRITERIA
 from ..io.datasets import provenance
+from ..io.hashing import sha256
 from ..lucky.ridge import LAMBDAS, RidgeModel, cross_validated_ridge
 from ..studyspec.case import Case
+from ..studyspec.scaling import training_case
 
 FEATURES = ("lgs_rms", "lgs_residual_rms") + tuple(name for name, _ in TARGET_CRITERIA + FRAME_CRITERIA)
 """The telemetry criteria (variables ``<name>_nm``) the model is fitted on."""
@@ -104,7 +106,7 @@ def learned_rms_nm(model: xr.Dataset, telemetry: xr.Dataset, target: int) -> np.
             f"the learned model was trained on seed {training}, the seed of the frames it would score: "
             "set ao.learned_training_seed to another seed"
         )
-    if model.attrs["config_sha256"] != telemetry.attrs["config_sha256"]:
+    if model.attrs["config_sha256"] != sha256(training_case(json.loads(telemetry.attrs["config_json"]), training)):
         raise ValueError("the learned model was trained on another case's config: remake it")
     if list(model["feature"].values) != list(FEATURES):
         raise ValueError(f"the learned model's features are not {list(FEATURES)}: remake it")

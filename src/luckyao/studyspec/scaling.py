@@ -154,6 +154,18 @@ def seeded_case(case: dict, seed: int) -> dict:
     return out
 
 
+def training_case(case: dict, seed: int) -> dict:
+    """The config of a case's training twin (``ao.learned_training_seed`` = ``seed``): the case
+    with its layers' strengths in time drawn from ``seed`` too, so that the twin shares no
+    turbulence history with the frames the learned criterion scores (the case itself without
+    ``atmosphere.layer_variability``)."""
+    if "layer_variability" not in case["atmosphere"]:
+        return case
+    out = copy.deepcopy(case)
+    out["atmosphere"]["layer_variability"]["seed"] = seed
+    return out
+
+
 def derived_keys(merged: dict, resolved: dict) -> dict[str, object]:
     """``{key path: value}`` of the keys a case left out and got derived (:data:`DERIVED_KEYS`,
     :data:`PRIOR_KEY`)."""

@@ -27,7 +27,7 @@ from .products import (
     turbulence_key,
     turbulence_spec,
 )
-from .scaling import derived_case, derived_keys
+from .scaling import derived_case, derived_keys, training_case
 from .schema import deep_merge
 from .study import drawn_cases, unused_cases
 from .sweeps import expand_sweeps
@@ -93,10 +93,12 @@ def _product(kind: type[Product], spec: dict | None) -> Product | None:
 @dataclass(frozen=True, eq=False)
 class TrainingTwin:
     """The run that trains a case's ``learned`` criterion (``ao.learned_training_seed``): the same
-    case with the training seed, so its own screens and LGS slopes; its reconstructor, command
-    matrix and WFS calibration are the case's (the same instrument)."""
+    case with the training seed, so its own screens, LGS slopes and layer strengths in time
+    (``config``: :func:`.scaling.training_case`); its reconstructor, command matrix and WFS
+    calibration are the case's (the same instrument)."""
 
     seed: int
+    config: dict
     screens: Screens
     slopes: Slopes
 
@@ -106,9 +108,9 @@ def _training_twin(study: dict, case: dict, duration_s: float) -> TrainingTwin |
     seed = case["ao"].get("learned_training_seed")
     if seed is None:
         return None
-    twin_study = {**study, "seed": seed}
-    screens = turbulence_spec(twin_study, case, duration_s)
-    return TrainingTwin(seed, Screens(screens), Slopes(slopes_spec(twin_study, case, screens)))
+    twin_study, twin_case = {**study, "seed": seed}, training_case(case, seed)
+    screens = turbulence_spec(twin_study, twin_case, duration_s)
+    return TrainingTwin(seed, twin_case, Screens(screens), Slopes(slopes_spec(twin_study, twin_case, screens)))
 
 
 @dataclass(frozen=True, eq=False)
