@@ -81,6 +81,12 @@ CRITERIA = {
     "lgs_rms": "LGS rms",
     "lgs_residual_rms": "LGS pseudo-closed-loop rms",
     "true_rms": "true rms (oracle)",
+    "lgs_high_order_rms": "LGS rms beyond the DM's fit",
+    "lgs_ground_rms": "LGS ground-layer rms",
+    "lgs_altitude_rms": "LGS altitude-layer rms",
+    "dm_change_rms": "DM change between exposures",
+    "lgs_slope_rms": "LGS slope rms",
+    "learned": "learned (ridge on the laser criteria)",
 }
 
 
