@@ -18,7 +18,8 @@ from luckyao.figures.style import DISTINCT_COLOURS, DPI, PALETTE, SCREEN_INCHES,
 from luckyao.io.datasets import open_dataset
 
 FIGURES = Path(__file__).resolve().parents[1] / "figures"
-PUBLISHED = [path for run in ("paper", "telescopes", "stars") for path in sorted(FIGURES.glob(f"{run}/*.nc"))]
+PUBLISHED_RUNS = ("paper", "telescopes", "stars", "selection")
+PUBLISHED = [path for run in PUBLISHED_RUNS for path in sorted(FIGURES.glob(f"{run}/*.nc"))]
 
 
 def drawn(path: Path, laid_out: bool = True):
