@@ -136,4 +136,4 @@ def test_the_selection_overlay_is_valid():
     drawn = config["figures"]["selection_power"]["cases"]
     assert len(drawn) == 6 and all(cases[c]["ao"]["residual_budget"] for c in drawn)
     assert sum("layer_variability" in cases[c]["atmosphere"] for c in drawn) == 2
-    assert config["figures"]["selection_budget"]["cases"] == drawn
+    assert config["figures"]["residual_budget"]["cases"] == drawn
