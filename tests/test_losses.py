@@ -411,7 +411,9 @@ def fake_checkout(tmp_path):
     def run(folder: Path):
         log = tmp_path / "calls.log"
         log.unlink(missing_ok=True)
-        env = dict(os.environ, PYTHON=str(script), FAKE_PYTHON_SCRIPT=str(script), FAKE_LOG=str(log))
+        env = dict(
+            os.environ, PYTHON=str(script), FAKE_PYTHON_SCRIPT=str(script), FAKE_LOG=str(log), LUCKYAO_TEST_WORKERS="2"
+        )
         done = subprocess.run(
             ["bash", str(folder / "run.sh"), "test", "-q"],
             cwd=tmp_path,
@@ -427,6 +429,10 @@ def fake_checkout(tmp_path):
     return checkout, run
 
 
+SUITE = "-m pytest -n 2 --dist loadfile -q"
+"""The suite's call by ``run.sh test -q``: its files over two processes (``LUCKYAO_TEST_WORKERS``)."""
+
+
 def installs(calls: list[str]) -> bool:
     return any(call.startswith("-m pip install") and "-e" in call.split() for call in calls)
 
@@ -434,10 +440,10 @@ def installs(calls: list[str]) -> bool:
 def test_a_venv_is_built_once_and_records_its_checkout(fake_checkout):
     checkout, run = fake_checkout
     calls, _ = run(checkout)
-    assert calls[0].startswith("-m venv") and installs(calls) and calls[-1] == "-m pytest -q"
+    assert calls[0].startswith("-m venv") and installs(calls) and calls[-1] == SUITE
     assert (checkout / ".venv" / ".luckyao-installed").read_text().strip() == str(checkout.resolve())
     calls, err = run(checkout)
-    assert calls == ["-m pytest -q"] and "rebuilding" not in err
+    assert calls == [SUITE] and "rebuilding" not in err
 
 
 def test_a_moved_checkout_rebuilds_its_venv(fake_checkout, tmp_path):
@@ -453,7 +459,7 @@ def test_a_moved_checkout_rebuilds_its_venv(fake_checkout, tmp_path):
     assert calls[0].startswith("-m venv") and installs(calls)
     assert not (moved / ".venv" / "old").exists()
     assert (moved / ".venv" / ".luckyao-installed").read_text().strip() == str(moved.resolve())
-    assert run(moved)[0] == ["-m pytest -q"]
+    assert run(moved)[0] == [SUITE]
 
 
 def test_a_copied_checkout_rebuilds_its_own_venv_and_leaves_the_originals(fake_checkout, tmp_path):
@@ -469,7 +475,7 @@ def test_a_copied_checkout_rebuilds_its_own_venv_and_leaves_the_originals(fake_c
     assert (copy / ".venv" / ".luckyao-installed").read_text().strip() == str(copy.resolve())
     assert (checkout / ".venv" / "old").exists()
     assert (checkout / ".venv" / ".luckyao-installed").read_text().strip() == str(checkout.resolve())
-    assert run(checkout)[0] == ["-m pytest -q"]
+    assert run(checkout)[0] == [SUITE]
 
 
 def test_a_venv_of_an_older_run_sh_is_judged_by_its_editable_install(fake_checkout):
@@ -482,7 +488,7 @@ def test_a_venv_of_an_older_run_sh_is_judged_by_its_editable_install(fake_checko
     (checkout / ".venv" / ".luckyao-installed").write_text("")
     pth = site / "__editable__.luckyao-0.1.0.pth"
     pth.write_text(f"{checkout.resolve()}/src\n")
-    assert run(checkout)[0] == ["-m pytest -q"]
+    assert run(checkout)[0] == [SUITE]
     pth.write_text("/somewhere/else/src\n")
     calls, err = run(checkout)
     assert "built for /somewhere/else" in err and installs(calls)
