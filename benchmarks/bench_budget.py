@@ -17,51 +17,12 @@ from luckyao.threads import pin_one_thread  # no numpy: before it is imported
 pin_one_thread()
 
 import sys  # noqa: E402
-import tempfile  # noqa: E402
-import time  # noqa: E402
-from pathlib import Path  # noqa: E402
 
-import numpy as np  # noqa: E402
-
-sys.path.insert(0, str(Path(__file__).parent))
-from bench_step import DEFAULT_CASE, products, whole_loop_ms  # noqa: E402
-
-from luckyao.steps.screens import read_screens, write_screens  # noqa: E402
-from luckyao.studyspec.case import Case  # noqa: E402
-from luckyao.studyspec.products import turbulence_spec  # noqa: E402
-from luckyao.studyspec.schema import deep_merge  # noqa: E402
-from luckyao.studyspec.study import load_study  # noqa: E402
-
-N_STEPS = 400
-REPEATS = 3
+from ao_option import compare  # noqa: E402
 
 
 def main(config_path="config/config.yaml"):
-    study, cases = load_study(config_path)
-    duration_s = N_STEPS * cases[DEFAULT_CASE]["time_step_s"]
-    base = dict(cases[DEFAULT_CASE], duration_s=duration_s)
-    configs = {}
-    for mode in ("ltao", "glao"):
-        for budget in (False, True):
-            configs[f"{mode}{'_budget' if budget else ''}"] = deep_merge(
-                base, {"ao": {"mode": mode, "residual_budget": budget}}
-            )
-    spec = dict(turbulence_spec(study, base), duration_s=duration_s + 0.1)
-    with tempfile.TemporaryDirectory() as tmp:
-        write_screens(spec, Path(tmp) / "s.npy", Path(tmp) / "s.nc", {})
-        screens = read_screens(Path(tmp) / "s.npy", Path(tmp) / "s.nc")
-        np.asarray(screens.flat).sum()  # page the memory-mapped screens in
-        built = {mode: products(study, configs[mode]) for mode in ("ltao", "glao")}
-        runs = {name: [] for name in configs}
-        for _ in range(REPEATS):  # interleaved, so that the machine's drift hits every case alike
-            for name, config in configs.items():
-                start = time.perf_counter()
-                runs[name].append(whole_loop_ms(Case.from_config(config), screens, *built[name.split("_")[0]]))
-                print(f"{name}: {runs[name][-1]:.2f} ms per step ({time.perf_counter() - start:.0f} s)", flush=True)
-        for name, ms in runs.items():
-            print(f"ms_per_step_{name} {np.median(ms):.3f} (runs: {', '.join(f'{m:.2f}' for m in ms)})")
-        for mode in ("ltao", "glao"):
-            print(f"budget_ms_per_step_{mode} {np.median(runs[f'{mode}_budget']) - np.median(runs[mode]):.3f}")
+    compare(config_path, "residual_budget", "budget")
 
 
 if __name__ == "__main__":
