@@ -115,8 +115,17 @@ class OpenLoopCorrection:
         """DM surface (n_samples,) [rad at 500 nm] at the science pupil samples at ``step``."""
         return self.dm.surface_at(step)
 
+    def applied_commands(self, start_step: int) -> np.ndarray:
+        """The mean command (n_act,) [m] applied during the exposure starting at ``start_step``."""
+        return np.mean([self.dm.commands_at(start_step + i) for i in range(self.dm.exposure_steps)], axis=0)
+
     def residual_slopes(self, start_step: int, slopes: np.ndarray) -> np.ndarray:
         """Pseudo-closed-loop slopes of the exposure starting at ``start_step``: its
         open-loop slopes less the DM's, for the mean command applied during it."""
-        applied = np.mean([self.dm.commands_at(start_step + i) for i in range(self.dm.exposure_steps)], axis=0)
-        return slopes - (self.dm_slopes @ applied).reshape(slopes.shape)
+        return slopes - (self.dm_slopes @ self.applied_commands(start_step)).reshape(slopes.shape)
+
+    def residual_rms_nm(self, start_steps, slopes: np.ndarray, estimator) -> np.ndarray:
+        """Each target's pseudo-closed-loop rms [nm] (n_targets, exposure) of the exposures starting
+        at ``start_steps``, their slopes (exposure, n_beacons, 2, n_valid) [rad]: ``estimator``'s
+        (:class:`luckyao.tomography.criterion.LgsRmsEstimator`) of their :meth:`residual_slopes`."""
+        return estimator.rms_nm(np.stack([self.residual_slopes(int(s), e) for s, e in zip(start_steps, slopes)]))

@@ -14,8 +14,9 @@ paper-fidelity run (README, Paper fidelity):
 * slopes: ``SIMULATE_BYTES`` (the sensor's screens memory-mapped) plus the slopes it
   holds and writes, 4 bytes per slope of every WFS exposure;
 * simulate: ``SIMULATE_BYTES`` measured (the screens are memory-mapped) plus the
-  matrices and slopes it loads and a block of frames; the frame cube it writes, 4 bytes
-  per pixel of every imaged target's frames;
+  matrices and slopes it loads (with the iterative tomography, its layer grids, preconditioner
+  and sparse projections instead: :func:`iterative_tomography_bytes`) and a block of frames; the
+  frame cube it writes, 4 bytes per pixel of every imaged target's frames;
 * lucky: 1.5 GB and 0.21 GB of partial sums per detector for a 256-pixel camera at paper
   fidelity (the sweep's 19 detectors, ``cog`` alone: 4.7 GB measured), the partial sums
   scaling with the camera's pixels; a sub-pixel registration method's ~1/8 of that more.
@@ -38,12 +39,13 @@ from typing import NamedTuple
 from ..clock import FrameClock, frame_count
 from ..steps.screens import TurbulenceSpec, strip_specs
 from ..studyspec.lucky import registrations
-from ..studyspec.products import commands_spec, reconstructor_spec
+from ..studyspec.products import commands_spec, iterative, reconstructor_spec
 from ..studyspec.resolved import criteria_of, imaged_targets
 from ..studyspec.schema import ConfigError
 from ..studyspec.study import validate_study
 from ..studyspec.sweeps import expand_sweeps
 from ..studyspec.view import ResolvedStudy, resolve_study
+from ..units import ARCSEC_RAD
 
 BASE_BYTES = 0.4e9
 """Python with numpy, scipy, numba and pyFFTW loaded."""
@@ -126,18 +128,61 @@ def telemetry_bytes(case: dict) -> float:
     """A case's telemetry file: with AO every WFS exposure's DM commands (float32), and a few
     float32 values per target and frame."""
     commands = 0.0
-    if (spec := commands_spec(case)) is not None:
-        commands = 4.0 * spec["ao"]["n_actuators"] ** 2 * FrameClock.from_config(case).n_exposures
+    if case["ao"]["mode"] != "none":
+        commands = 4.0 * case["ao"]["n_actuators"] ** 2 * FrameClock.from_config(case).n_exposures
     return commands + 4.0 * 8 * len(case["targets_arcsec"]) * frame_count(case)
 
 
+def layer_grid_samples(case: dict) -> tuple[int, int]:
+    """The iterative tomography's layers and samples across each layer's grid
+    (:meth:`luckyao.layer_tomography.grids.LayerGrids.covering`, as the simulation builds them)."""
+    from ..layer_tomography.grids import LayerGrids  # imported only for an iterative case
+    from ..studyspec.case import lgs_from
+
+    lgs, n_sub = lgs_from(case["lgs"]), case["wfs"]["n_subapertures"]
+    subaperture_m = case["telescope"]["diameter_m"] / n_sub
+    directions = [*case["targets_arcsec"], case["ao"]["correction_direction_arcsec"]]
+    grids = LayerGrids.covering(
+        case["tomography"]["layer_heights_m"],
+        lgs.height_m,
+        subaperture_m / 2,
+        n_sub * subaperture_m / 2,
+        lgs.directions_rad,
+        [(x * ARCSEC_RAD, y * ARCSEC_RAD) for x, y in directions],
+    )
+    return grids.n_layers, grids.n
+
+
+ITERATIVE_VECTORS = 16
+"""Layer-sized float32 arrays the iterative tomography holds at once (PCG's six, the warm start,
+the frame's estimates, the FFTs' work arrays)."""
+
+
+def iterative_tomography_bytes(case: dict) -> float:
+    """The iterative tomography: :data:`ITERATIVE_VECTORS` float32 layer arrays, the FDPCG's
+    per-frequency inverse (complex128, built beside its system) and the sparse lines of sight
+    (four samples per layer and point, 12 bytes each) of every target and the DM fit's points
+    (a quarter of its pitch apart, with its influence functions)."""
+    n_layers, n = layer_grid_samples(case)
+    layer_bytes = ITERATIVE_VECTORS * 4.0 * n_layers * n * n
+    preconditioner = 2 * 16.0 * n * (n // 2 + 1) * n_layers**2
+    n_sub = case["wfs"]["n_subapertures"]
+    points = math.pi / 4 * (n_sub * case["tomography"]["points_per_subaperture"] + 2) ** 2
+    fit_points = math.pi / 4 * (4 * (case["ao"]["n_actuators"] - 1) + 2) ** 2
+    traces = 48.0 * n_layers * (points * len(case["targets_arcsec"]) + fit_points) + 12.0 * 25 * fit_points
+    return layer_bytes + preconditioner + traces
+
+
 def simulate_memory_bytes(case: dict) -> float:
-    """A simulation: its measured own memory, the matrices and slopes it loads, a block of frames."""
+    """A simulation: its measured own memory, the matrices and slopes it loads (or the iterative
+    tomography it builds), a block of frames."""
     matrices = 0.0
     if (spec := reconstructor_spec(case)) is not None:
         matrices += reconstructor_bytes(spec)
     if (spec := commands_spec(case)) is not None:
         matrices += commands_bytes(spec) + slopes_bytes(case)
+    if case["lgs"]["enabled"] and iterative(case):
+        matrices += iterative_tomography_bytes(case) + (slopes_bytes(case) if case["ao"]["mode"] != "none" else 0.0)
     block = 3 * 4.0 * len(case["targets_arcsec"]) * FRAME_BLOCK * case["camera"]["n_pixels"] ** 2
     return SIMULATE_BYTES + matrices + block
 
@@ -210,6 +255,10 @@ BUDGET_SHARE = 1.0
 """The residual budget's share of a step (``ao.residual_budget``: a noiseless twin of the LGS chain,
 the DM fits of the science and beacon phases and the parts' surfaces): +2.1 ms on the default AO
 case's 2.09 at 4.2 m, measured on a loaded machine (docs/performance.md)."""
+ITERATIVE_NS_PER_SAMPLE, ITERATIVE_ITERATIONS = 80.0, 60
+"""The iterative tomography's time per PCG iteration and layer sample, and its iterations per
+exposure (warm-started): 6.5 ms per iteration on 9 layers of 96² (4.2 m, a loaded machine), 54-56
+iterations per exposure with Rayleigh beacons, 31-38 with sodium ones at 16 and 39 m (docs/performance.md)."""
 SCREENS_NS_PER_SAMPLE = 141.0
 """One core's time per screen sample (the paper's 2.3e9 samples: 5.4 minutes of CPU)."""
 RECONSTRUCTOR_S_16, RECONSTRUCTOR_EXPONENT = 1.7, 1.33
@@ -266,11 +315,22 @@ def slopes_seconds(case: dict) -> float:
     return FrameClock.from_config(case).n_steps * LGS_SHARE * beacons * step_ms(case) / 1e3
 
 
+def iterative_seconds(case: dict) -> float:
+    """The iterative tomography's solves (0 for a dense case or without LGS): every WFS exposure's
+    :data:`ITERATIVE_ITERATIONS` iterations at :data:`ITERATIVE_NS_PER_SAMPLE` per layer sample."""
+    if not (case["lgs"]["enabled"] and iterative(case)):
+        return 0.0
+    n_layers, n = layer_grid_samples(case)
+    exposure_s = ITERATIVE_ITERATIONS * ITERATIVE_NS_PER_SAMPLE * 1e-9 * n_layers * n * n
+    return FrameClock.from_config(case).n_exposures * exposure_s
+
+
 def simulate_seconds(case: dict) -> float:
     """A simulation: its steps at :func:`step_ms` (the whole loop: an AO case replaying its LGS
-    chain's slopes takes less), :data:`BUDGET_SHARE` more with the residual budget."""
+    chain's slopes takes less), :data:`BUDGET_SHARE` more with the residual budget, and the
+    iterative tomography's solves (:func:`iterative_seconds`)."""
     budget = BUDGET_SHARE if case.get("ao", {}).get("residual_budget", False) else 0.0
-    return FrameClock.from_config(case).n_steps * (1 + budget) * step_ms(case) / 1e3
+    return FrameClock.from_config(case).n_steps * (1 + budget) * step_ms(case) / 1e3 + iterative_seconds(case)
 
 
 def simulate_minutes(case: dict) -> int:

@@ -13,9 +13,9 @@ EXPORTS = {
     "noise": ("SlopeNoise",),
     "preconditioner": ("FourierPreconditioner",),
     "solver": ("LayerTomography", "pcg"),
-    "projection": ("LineOfSight", "DmProjection", "line_of_sight_matrix"),
+    "projection": ("LineOfSight", "DmProjection", "line_of_sight_matrix", "sparse_influence"),
     "assembly": ("build_tomography",),
-    "correction": ("LayerCorrection", "layer_estimate_for"),
+    "correction": ("LayerEstimator", "LayerCorrection"),
 }
 """Public objects, by module (imported on first use: :mod:`luckyao.exports`)."""
 

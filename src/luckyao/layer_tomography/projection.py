@@ -72,12 +72,14 @@ class LineOfSight:
         points = np.asarray(points_xy_m, dtype=float)
         return cls(line_of_sight_matrix(grids, points, direction_rad, layers=layers), TiltRemover(*points.T))
 
-    def path_m(self, layers: np.ndarray) -> np.ndarray:
-        return self.tilt.residual(self.trace @ layers.reshape(-1))
+    def path_m(self, layers: np.ndarray, less_m: np.ndarray | None = None) -> np.ndarray:
+        """The tilt-removed path [m] at the points, less ``less_m`` (n_points,) [m] (e.g. the DM's shape)."""
+        path = self.trace @ layers.reshape(-1)
+        return self.tilt.residual(path if less_m is None else path - less_m)
 
-    def rms_nm(self, layers: np.ndarray) -> float:
-        """Tilt-removed rms [nm] along the line of sight (the ``lgs_rms`` of one exposure)."""
-        return float(np.sqrt(np.mean(self.path_m(layers) ** 2)) * 1e9)
+    def rms_nm(self, layers: np.ndarray, less_m: np.ndarray | None = None) -> float:
+        """Tilt-removed rms [nm] along the line of sight (the ``lgs_rms`` of one exposure), less ``less_m``."""
+        return float(np.sqrt(np.mean(self.path_m(layers, less_m) ** 2)) * 1e9)
 
 
 @dataclass(frozen=True, eq=False)

@@ -26,6 +26,7 @@ from ..ao.correction import DelayedDm, OpenLoopCorrection
 from ..ao.laser_criteria import FRAME_CRITERIA, TARGET_CRITERIA, LaserCriteria
 from ..atmosphere.screens import ScreenSet
 from ..io.datasets import open_dataset, require_finite
+from ..layer_tomography.correction import LayerCorrection, LayerEstimator
 from ..optics.imaging import Imager
 from ..optics.propagation import Propagator
 from ..optics.pupil import TiltRemover
@@ -197,7 +198,7 @@ def simulate(
     screens: ScreenSet,
     write_frames,
     sensor: LgsSensor | None = None,
-    estimator: LgsRmsEstimator | None = None,
+    estimator: LgsRmsEstimator | LayerEstimator | None = None,
     commands: tuple[np.ndarray, np.ndarray] | None = None,
     imaged_targets=None,
     block_frames: int = 32,
@@ -213,7 +214,9 @@ def simulate(
     without AO may instead be given them (target, frame), as measured by a case with the
     same LGS chain (:func:`luckyao.studyspec.products.lgs_twin`);
     with ``commands`` (the command matrix and the DM slopes of the case's
-    ``ao`` settings, :func:`luckyao.steps.reconstructor.build_commands`) the DM
+    ``ao`` settings, :func:`luckyao.steps.reconstructor.build_commands`), or an AO case's
+    iterative ``estimator`` (:class:`luckyao.layer_tomography.correction.LayerEstimator`, whose
+    layer estimates give the commands: ``tomography.method: iterative``), the DM
     corrects every step, each frame gets its ``lgs_residual_rms_nm`` and every
     exposure's DM commands are recorded (``dm_commands_m``), so that the science path
     of the targets not imaged can be replayed (:class:`Replay`). With AO and a
@@ -236,8 +239,12 @@ def simulate(
     science = SciencePath(case, screens, range(n_targets), imaged)
     imager = science.imager
     correction = apodisation = None
+    timing = (clock.exposure_steps, case.ao.delay_steps, spf) if case.ao is not None else None
     if commands is not None:
-        correction = OpenLoopCorrection(*commands, science.dm_surface(), clock.exposure_steps, case.ao.delay_steps, spf)
+        correction = OpenLoopCorrection(*commands, science.dm_surface(), *timing)
+    elif isinstance(estimator, LayerEstimator) and estimator.projection is not None:
+        correction = LayerCorrection(estimator.projection, science.dm_surface(), *timing)
+    if correction is not None:
         dm_commands = np.empty((clock.n_exposures, correction.dm.n_actuators), np.float32)
         apodisation = science.apodisation(correction.dm)
         if apodisation is not None and apodisation.point_labels is not None:  # LGS driver
@@ -249,8 +256,10 @@ def simulate(
             )  # (n_points, n_act) [m / m]
     budget = None
     if budget_sensor is not None:
-        if correction is None or sensor is None:
-            raise ValueError("the residual budget needs AO and the LGS sensor (or its recorded slopes)")
+        if commands is None or sensor is None:
+            raise ValueError(
+                "the residual budget needs AO with the dense command matrix and the LGS sensor (or its recorded slopes)"
+            )
         budget = ResidualBudget(
             case.ao.deformable_mirror(case.telescope),
             commands[0],
@@ -262,8 +271,10 @@ def simulate(
         budget_rms_nm = np.empty((len(PARTS), n_frames))
         budget_cross_nm2 = np.empty(n_frames)
     if laser is not None:
-        if correction is None or sensor is None:
-            raise ValueError("the laser criteria need AO and the LGS sensor (or its recorded slopes)")
+        if commands is None or sensor is None:
+            raise ValueError(
+                "the laser criteria need AO with the dense command matrix and the LGS sensor (or its recorded slopes)"
+            )
         laser_target_nm = np.empty((len(TARGET_CRITERIA), n_targets, n_frames), dtype=np.float32)
         laser_frame_nm = np.empty((len(FRAME_CRITERIA), n_frames), dtype=np.float32)
     steps_max = science.propagator.n_steps_max
@@ -307,10 +318,11 @@ def simulate(
                 require_finite(
                     slopes, f"LGS slopes of frame {frame}", "slopes", ("exposure", "beacon", "axis", "subaperture")
                 )
-                lgs_rms[:, frame] = lucky_frame_rms_nm(estimator.rms_nm(slopes))
+                estimates = estimator.estimate(slopes)  # the slopes; the iterative path's layers
+                lgs_rms[:, frame] = lucky_frame_rms_nm(estimator.rms_nm(estimates))
                 if correction is not None:
-                    for i, start_step, exposure in zip(clock.exposure_offsets(), starts, slopes):
-                        dm_commands[clock.exposure(start_step)] = correction.measure(int(start_step), exposure)
+                    for i, start_step, exposure, estimate in zip(clock.exposure_offsets(), starts, slopes, estimates):
+                        dm_commands[clock.exposure(start_step)] = correction.measure(int(start_step), estimate)
                         if budget is not None:
                             budget.exposure(int(start_step), steps[i : i + e], layer_scales[i : i + e], exposure)
                         if apodisation is not None and apodisation.point_labels is not None:
@@ -319,10 +331,8 @@ def simulate(
                                 estimator.reconstructors[0] @ exposure.ravel(),
                                 dm_at_points @ dm_commands[clock.exposure(start_step)],
                             )
-                    residual = np.stack(
-                        [correction.residual_slopes(int(s), exposure) for s, exposure in zip(starts, slopes)]
-                    )
-                    lgs_residual_rms[:, frame] = lucky_frame_rms_nm(estimator.rms_nm(residual))
+                    residual = correction.residual_rms_nm(starts, estimates, estimator)
+                    lgs_residual_rms[:, frame] = lucky_frame_rms_nm(residual)
                     if laser is not None:
                         laser_target_nm[:, :, frame], laser_frame_nm[:, frame] = laser.frame(
                             slopes, dm_commands[clock.frame_exposures(frame)]
@@ -357,8 +367,13 @@ def simulate(
             lgs_residual_rms,
             {
                 "units": "nm",
-                "long_name": "tilt-removed rms of the LGS pseudo-closed-loop reconstruction (open-loop "
-                "slopes less the DM's) along the target, over the frame's WFS exposures",
+                "long_name": (
+                    "tilt-removed rms of the LGS pseudo-closed-loop reconstruction (open-loop layer estimate "
+                    "less the applied DM shape) along the target, over the frame's WFS exposures"
+                    if isinstance(correction, LayerCorrection)
+                    else "tilt-removed rms of the LGS pseudo-closed-loop reconstruction (open-loop "
+                    "slopes less the DM's) along the target, over the frame's WFS exposures"
+                ),
             },
         )
         if apodisation is not None:
@@ -450,7 +465,11 @@ class TimeLoop:
     in the loop with ``seed`` and the WFS ``calibration`` (:func:`lgs_chain`); its estimator from
     ``reconstructors``. Without either, none: a no-AO case may be given its twin's ``lgs_rms_nm``
     (target, frame) (:func:`twin_lgs_rms_nm`). ``commands`` (the command matrix and the DM
-    slopes) with AO; ``imaged_targets`` as :func:`simulate`'s. With ``ao.residual_budget`` the
+    slopes) with AO; ``imaged_targets`` as :func:`simulate`'s. With ``tomography.method:
+    iterative`` no reconstructors or commands: the estimator and, with AO, the DM commands come
+    from the layer tomography built here
+    (:meth:`luckyao.layer_tomography.correction.LayerEstimator.for_case`), the sensor (unless
+    its slopes are replayed or its ``lgs_rms_nm`` given) measured in the loop. With ``ao.residual_budget`` the
     budget's noiseless sensor, with ``ao.laser_criteria`` the laser criteria
     (:func:`laser_criteria_of`). Built here (the sensor's set-up
     takes seconds, which a benchmark leaves out of its timing); :meth:`run` runs it once.
@@ -472,7 +491,15 @@ class TimeLoop:
         self.case, self.screens, self.commands = case, screens, commands
         self.lgs_rms_nm, self.imaged_targets = lgs_rms_nm, imaged_targets
         self.sensor = self.estimator = None
-        if slopes is not None:
+        if case.tomography.iterative:
+            if reconstructors is not None or commands is not None:
+                raise ValueError("tomography.method: iterative builds its own estimator: give no dense products")
+            if slopes is not None or (case.lgs is not None and lgs_rms_nm is None):
+                self.sensor = slopes if slopes is not None else lgs_sensor(case, screens, seed, calibration)
+                self.estimator = LayerEstimator.for_case(case)
+                if self.estimator.n_slopes != self.sensor.n_slopes:
+                    raise ValueError("the layer tomography does not match this WFS")
+        elif slopes is not None:
             self.sensor, self.estimator = slopes, LgsRmsEstimator(reconstructors, slopes.n_slopes)
         elif reconstructors is not None:
             self.sensor, self.estimator = lgs_chain(case, screens, reconstructors, seed, calibration)

@@ -61,11 +61,19 @@ class WfsSettings:
 
 @dataclass(frozen=True)
 class TomographySettings:
-    """MAP tomography: the layered prior, the slope-noise term and the point pitch."""
+    """MAP tomography: the layered prior, the slope-noise term, the point pitch, and the method
+    (``dense`` slope-space matrices or the ``iterative`` layer-space estimate, solved to
+    ``iterative_rtol``)."""
 
     prior: TurbulencePrior
     noise_rms_arcsec: float
     points_per_subaperture: int
+    method: str
+    iterative_rtol: float
+
+    @property
+    def iterative(self) -> bool:
+        return self.method == "iterative"
 
     @property
     def noise_rms_rad(self) -> float:
@@ -149,7 +157,14 @@ def tomography_from(block: dict) -> TomographySettings:
         tuple(block["layer_heights_m"]),
         tuple(block["layer_cn2_fraction"]),
     )
-    return TomographySettings(prior, block["noise_rms_arcsec"], block["points_per_subaperture"])
+    options = {**case_defaults("tomography"), **block}
+    return TomographySettings(
+        prior,
+        block["noise_rms_arcsec"],
+        block["points_per_subaperture"],
+        options["method"],
+        options["iterative_rtol"],
+    )
 
 
 def targets_from(targets_arcsec) -> tuple[LineOfSight, ...]:

@@ -48,9 +48,20 @@ def screens_durations(study: dict, cases: dict) -> dict[str, float]:
     return {name: longest[group] for name, group in groups.items()}
 
 
+def iterative(case: dict) -> bool:
+    """Whether a resolved case's tomography is the iterative layer-space estimate, built in its
+    simulation: then it has no dense reconstructor or command-matrix product."""
+    return case["tomography"].get("method") == "iterative"
+
+
+ITERATIVE_KEYS = frozenset(("method", "iterative_rtol"))
+"""The tomography's keys that choose and tune its method (absent at their defaults: ``scaling.derived_case``)."""
+
+
 def reconstructor_spec(case: dict) -> dict | None:
-    """Everything a case's tomographic reconstructor depends on (None without LGS)."""
-    if not case["lgs"]["enabled"]:
+    """Everything a case's tomographic reconstructor depends on (None without LGS, or with the
+    iterative tomography)."""
+    if not case["lgs"]["enabled"] or iterative(case):
         return None
     return {key: case[key] for key in ("telescope", "lgs", "wfs", "tomography", "targets_arcsec")}
 
@@ -60,9 +71,9 @@ def reconstructor_key(spec: dict) -> str:
 
 
 def commands_spec(case: dict) -> dict | None:
-    """Everything a case's AO command matrix depends on (None without AO): not the
-    targets or the atmosphere, so cases that differ only there share it."""
-    if case["ao"]["mode"] == "none":
+    """Everything a case's AO command matrix depends on (None without AO, or with the iterative
+    tomography): not the targets or the atmosphere, so cases that differ only there share it."""
+    if case["ao"]["mode"] == "none" or iterative(case):
         return None
     not_in_commands = ("apodisation", "residual_budget", "laser_criteria", "learned_training_seed")
     ao = {key: value for key, value in case["ao"].items() if key not in not_in_commands}
@@ -106,9 +117,14 @@ def lgs_spec(case: dict) -> dict | None:
 
 
 def lgs_chain_config(case: dict) -> dict:
-    """A resolved case less its AO (the LGS sensor is open loop: it never sees the DM) and its
-    targets, which its LGS slopes do not depend on; the rest makes a :class:`.case.Case`."""
-    return {key: value for key, value in case.items() if key not in ("ao", "targets_arcsec", "reference_target")}
+    """A resolved case less its AO (the LGS sensor is open loop: it never sees the DM), its
+    targets and its tomography's method, which its LGS slopes do not depend on (cases that differ
+    only there share them); the rest makes a :class:`.case.Case`."""
+    chain = {key: value for key, value in case.items() if key not in ("ao", "targets_arcsec", "reference_target")}
+    if ITERATIVE_KEYS & case["tomography"].keys():
+        tomography = {key: value for key, value in case["tomography"].items() if key not in ITERATIVE_KEYS}
+        chain["tomography"] = tomography
+    return chain
 
 
 def slopes_spec(study: dict, case: dict, screens: dict | None = None) -> dict | None:

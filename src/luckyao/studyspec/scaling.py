@@ -133,10 +133,17 @@ PRIOR_KEY = "tomography.prior_r0_500nm_m"
 
 
 def derived_case(case: dict, where: str) -> dict:
-    """A merged case (schema-valid) resolved: :func:`derive_size_defaults`, and the prior's r0
-    (:data:`PRIOR_KEY`) the case's mean r0 when left out."""
+    """A merged case (schema-valid) resolved: :func:`derive_size_defaults`, the prior's r0
+    (:data:`PRIOR_KEY`) the case's mean r0 when left out, and ``tomography.method`` left out when
+    it is the default (``dense``), with the iterative method's keys: a case that spells the
+    default out keeps the config hash and product keys of one that does not."""
     out = derive_size_defaults(case, where)
-    out["tomography"].setdefault("prior_r0_500nm_m", out["atmosphere"]["r0_500nm_m"])
+    tomography = out["tomography"]
+    tomography.setdefault("prior_r0_500nm_m", out["atmosphere"]["r0_500nm_m"])
+    if tomography.get("method") == case_defaults("tomography")["method"]:
+        del tomography["method"]
+    if "method" not in tomography:
+        tomography.pop("iterative_rtol", None)
     return out
 
 

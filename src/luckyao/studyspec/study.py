@@ -81,6 +81,8 @@ def _check_case(name: str, case: dict, turbulence: dict) -> None:
         raise ConfigError(
             f"config key '{where}.ao.learned_training_seed': needs ao.laser_criteria: true (its features)"
         )
+    if tomo.get("method") == "iterative":
+        _check_iterative(where, case)
     if case["telescope"]["obscuration_m"] >= case["telescope"]["diameter_m"]:
         raise ConfigError(f"config key '{where}.telescope.obscuration_m': must be below diameter_m")
     reference = case.get("reference_target")
@@ -98,6 +100,19 @@ def _check_case(name: str, case: dict, turbulence: dict) -> None:
                 f"config key '{where}.targets_arcsec': target ({x}, {y}) lies beyond "
                 f"turbulence.field_radius_arcsec = {radius}"
             )
+
+
+def _check_iterative(where: str, case: dict) -> None:
+    """The iterative tomography builds no dense matrix: what needs one is refused, naming its key."""
+    ao = case["ao"]
+    needs_dense = [key for key in ("residual_budget", "laser_criteria") if ao.get(key)]
+    if ao.get("apodisation", {}).get("driver") == "lgs":
+        needs_dense.append("apodisation.driver")
+    if needs_dense:
+        raise ConfigError(
+            f"config key '{where}.ao.{needs_dense[0]}': needs tomography.method dense (it uses the dense "
+            "reconstructors or command matrix), the case has tomography.method: iterative"
+        )
 
 
 def _check_stars(where: str, case: dict) -> None:

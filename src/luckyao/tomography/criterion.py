@@ -42,6 +42,12 @@ class LgsRmsEstimator:
         # for the same kernel: the same sums
         self._transposed = np.ascontiguousarray(self.reconstructors.transpose(0, 2, 1))
 
+    def estimate(self, slopes: np.ndarray) -> np.ndarray:
+        """What :meth:`rms_nm` and the dense correction take of exposures' slopes: the slopes
+        themselves (the iterative path's :class:`luckyao.layer_tomography.correction.LayerEstimator`
+        gives its layer estimates)."""
+        return slopes
+
     def rms_nm(self, slopes: np.ndarray) -> np.ndarray:
         """Each target's reconstructed tilt-removed rms [nm] (n_targets, ...) from
         slopes (..., n_beacons, 2, n_valid): a frame's exposures in one call read
