@@ -13,13 +13,13 @@ import test_tomography as known  # the known layered phase of the dense tests
 
 from luckyao.ao.control import command_matrix
 from luckyao.ao.dm import DeformableMirror
+from luckyao.io.datasets import provenance, write_dataset
 from luckyao.layer_tomography.assembly import DEFAULT_RTOL, build_tomography
 from luckyao.layer_tomography.operators import bilinear_matrix
 from luckyao.layer_tomography.prior import von_karman_psd_m2
 from luckyao.layer_tomography.projection import DmProjection, LineOfSight
 from luckyao.layer_tomography.solver import pcg
 from luckyao.optics.pupil import Telescope, TiltRemover
-from luckyao.io.datasets import provenance, write_dataset
 from luckyao.steps.lgs_slopes import RecordedSlopes, measure_lgs_slopes
 from luckyao.steps.simulation import TimeLoop
 from luckyao.studyspec.case import Case
