@@ -14,7 +14,7 @@ import test_tomography as known  # the known layered phase of the dense tests
 from luckyao.ao.control import command_matrix
 from luckyao.ao.dm import DeformableMirror
 from luckyao.io.datasets import provenance, write_dataset
-from luckyao.layer_tomography.assembly import DEFAULT_RTOL, build_tomography
+from luckyao.layer_tomography.assembly import DEFAULT_WARM_RTOL, build_tomography
 from luckyao.layer_tomography.operators import bilinear_matrix
 from luckyao.layer_tomography.prior import von_karman_psd_m2
 from luckyao.layer_tomography.projection import DmProjection, LineOfSight
@@ -156,6 +156,22 @@ def test_pcg_converges_to_the_direct_sparse_solve():
     assert warm.iterations == 0
 
 
+def test_warm_started_solves_stop_at_the_warm_tolerance():
+    """The first exposure (cold) is solved to ``rtol``, the next (from the previous solution) to
+    ``warm_rtol``: fewer iterations than to ``rtol``, a residual between the two."""
+    tomo = small_tomography(rtol=1e-8, warm_rtol=1e-3)
+    op, rng = tomo.operator, np.random.default_rng(4)
+    slopes = [op.forward(rng.normal(size=op.grids.shape) * 1e-7) for _ in range(2)]
+    tomo.estimate(slopes[0])
+    previous = tomo._previous
+    b = tomo.right_hand_side(slopes[1])
+    warm = tomo.estimate(slopes[1])
+    residual = np.linalg.norm(b - tomo.normal(warm)) / np.linalg.norm(b)
+    assert 1e-8 < residual <= 1.01e-3
+    tight = pcg(tomo.normal, b, previous, tomo.preconditioner.apply, 1e-8, 200)
+    assert tomo.iterations[1] < tight.iterations / 2
+
+
 def on_axis_error(prior, n_beacons):
     directions = LgsConfig(n_beacons=n_beacons).directions_rad
     tomo = build_tomography(prior, known.WFS, directions, LGS.height_m, known.NOISE_RAD, rtol=1e-4)
@@ -261,7 +277,7 @@ def test_iterative_case_has_no_dense_products_and_shares_the_slopes(default_stud
     assert iterative["slopes"] == dense["slopes"] and iterative["config_sha256"] != dense["config_sha256"]
     assert resolve_study(study, validate_study(study)).cases["noao_r0_15cm"].lgs_twin != "ltao_r0_15cm"
     case = Case.from_config(validate_study(study)["ltao_r0_15cm"])
-    assert case.tomography.iterative and case.tomography.iterative_rtol == DEFAULT_RTOL
+    assert case.tomography.iterative and case.tomography.iterative_rtol == DEFAULT_WARM_RTOL
 
 
 @pytest.mark.parametrize(

@@ -38,8 +38,8 @@ class LayerEstimator:
     @classmethod
     def for_case(cls, case, **options) -> "LayerEstimator":
         """The estimator of a :class:`luckyao.studyspec.case.Case` with LGS: its prior, WFS, beacons,
-        slope noise and ``tomography.iterative_rtol``, on grids covering its targets and correction
-        direction; with AO, its DM and correction mode. ``options`` go to
+        slope noise and ``tomography.iterative_rtol`` (a warm-started solve's tolerance), on grids
+        covering its targets and correction direction; with AO, its DM and correction mode. ``options`` go to
         :func:`.assembly.build_tomography`."""
         targets = [(t.theta_x_rad, t.theta_y_rad) for t in case.targets]
         ao = case.ao if case.ao is not None and case.ao.enabled else None
@@ -51,7 +51,7 @@ class LayerEstimator:
             case.lgs.height_m,
             case.tomography.noise_rms_rad,
             target_directions_rad=targets + ([ao.correction_direction_rad] if ao else []),
-            **{"rtol": case.tomography.iterative_rtol, **options},
+            **{"warm_rtol": case.tomography.iterative_rtol, **options},
         )
         grids = tomography.operator.grids
         points = reconstruction_points(case.telescope, wfs.subaperture_m, case.tomography.points_per_subaperture)

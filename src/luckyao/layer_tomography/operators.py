@@ -18,6 +18,7 @@ from functools import cached_property
 import numpy as np
 import scipy.sparse
 
+from . import kernels
 from .grids import LayerGrids
 
 EDGE_WEIGHTS = {1: (0.5, 0.5), 2: (0.25, 0.5, 0.25)}
@@ -68,31 +69,26 @@ class BeaconRayTracing:
         return cls(grids, m, offsets)
 
     @cached_property
-    def _stencils(self) -> list[tuple[int, int, tuple[tuple[int, int, float], ...]]]:
-        """Per layer: the integer offset (column, row) and the four (d_row, d_column, weight)."""
-        stencils = []
-        for column, row in self.offsets:
-            c0, r0 = int(np.floor(column)), int(np.floor(row))
-            fc, fr = column - c0, row - r0
-            taps = tuple((dr, dc, wr * wc) for dr, wr in ((0, 1 - fr), (1, fr)) for dc, wc in ((0, 1 - fc), (1, fc)))
-            stencils.append((c0, r0, taps))
-        return stencils
+    def _stencils(self) -> tuple[np.ndarray, np.ndarray]:
+        """Per layer: the integer offset (column, row) (n_layers, 2) and the weights of the taps
+        (d_row, d_column) = (0, 0), (0, 1), (1, 0), (1, 1) (n_layers, 4)."""
+        integer = np.floor(self.offsets)
+        fc, fr = (self.offsets - integer).T
+        weights = np.stack([(1 - fr) * (1 - fc), (1 - fr) * fc, fr * (1 - fc), fr * fc], axis=1)
+        return integer.astype(np.int64), weights
 
     def forward(self, layers: np.ndarray) -> np.ndarray:
-        """Pupil phase ``(m, m)`` [m] of layers ``(n_layers, n, n)`` [m]."""
-        m = self.m
-        out = np.zeros((m, m), dtype=layers.dtype)
-        for layer, (c0, r0, taps) in zip(layers, self._stencils):
-            for dr, dc, weight in taps:
-                out += weight * layer[r0 + dr : r0 + dr + m, c0 + dc : c0 + dc + m]
-        return out
+        """Pupil phase ``(m, m)`` [m] of layers ``(n_layers, n, n)`` [m] (:func:`.kernels.trace`)."""
+        corners, weights = self._stencils
+        phase = np.empty((self.m, self.m), dtype=layers.dtype)
+        kernels.trace(np.ascontiguousarray(layers), corners, weights.astype(layers.dtype), phase)
+        return phase
 
     def adjoint_add(self, phase: np.ndarray, layers: np.ndarray) -> None:
-        """``layers += R^T phase`` for a pupil phase ``(m, m)``."""
-        m = self.m
-        for layer, (c0, r0, taps) in zip(layers, self._stencils):
-            for dr, dc, weight in taps:
-                layer[r0 + dr : r0 + dr + m, c0 + dc : c0 + dc + m] += weight * phase
+        """``layers += R^T phase`` for a pupil phase ``(m, m)`` (layers C-contiguous)."""
+        corners, weights = self._stencils
+        phase = np.ascontiguousarray(phase, layers.dtype)
+        kernels.trace_adjoint_add(phase, corners, weights.astype(layers.dtype), layers)
 
     def matrix(self) -> scipy.sparse.csr_matrix:
         """``R`` as a sparse matrix ``(m * m, n_layers * n * n)`` (:func:`bilinear_matrix` per layer)."""
@@ -125,37 +121,26 @@ class SubapertureGradient:
         """Pupil samples across, ``o n + 1``."""
         return self.oversampling * self.valid.shape[0] + 1
 
-    def _edge_means(self, phase: np.ndarray, axis: int) -> np.ndarray:
-        """Trapezoid means along ``axis`` over each sub-aperture's ``o + 1`` samples (o n + 1 -> n)."""
-        o, n = self.oversampling, self.valid.shape[0]
-        p = np.moveaxis(phase, axis, 0)
-        means = sum(w * p[t : t + o * n : o] for t, w in enumerate(EDGE_WEIGHTS[o]))
-        return np.moveaxis(means, 0, axis)
+    @cached_property
+    def _corners(self) -> tuple[np.ndarray, np.ndarray]:
+        """First pupil sample (row, column) of each valid sub-aperture, row-major (n_valid,) each."""
+        rows, columns = np.nonzero(self.valid)
+        return self.oversampling * rows, self.oversampling * columns
 
     def forward(self, phase: np.ndarray) -> np.ndarray:
-        o, d = self.oversampling, self.subaperture_m
-        along_y = self._edge_means(phase, 0)  # (n, m): means along each sub-aperture's x-edges
-        along_x = self._edge_means(phase, 1)  # (m, n)
-        sx = (along_y[:, o::o] - along_y[:, 0:-1:o]) / d
-        sy = (along_x[o::o, :] - along_x[0:-1:o, :]) / d
-        return np.stack([sx[self.valid], sy[self.valid]])
+        """Slopes ``(2, n_valid)`` [rad] of a pupil phase ``(m, m)`` [m] (:func:`.kernels.edge_differences`)."""
+        slopes = np.empty((2, self.n_valid), dtype=phase.dtype)
+        weights = np.asarray(EDGE_WEIGHTS[self.oversampling], dtype=phase.dtype)
+        side = phase.dtype.type(self.subaperture_m)
+        kernels.edge_differences(np.ascontiguousarray(phase), *self._corners, weights, side, slopes)
+        return slopes
 
     def adjoint(self, slopes: np.ndarray) -> np.ndarray:
-        """``G^T`` of slopes ``(2, n_valid)``: a pupil phase ``(m, m)``."""
-        o, n, m, d = self.oversampling, self.valid.shape[0], self.m, self.subaperture_m
-        gx = np.zeros((n, n), dtype=slopes.dtype)
-        gy = np.zeros((n, n), dtype=slopes.dtype)
-        gx[self.valid], gy[self.valid] = slopes[0] / d, slopes[1] / d
-        tx = np.zeros((n, m), dtype=slopes.dtype)  # adjoint of the x difference
-        tx[:, o::o] += gx
-        tx[:, 0:-1:o] -= gx
-        ty = np.zeros((m, n), dtype=slopes.dtype)
-        ty[o::o, :] += gy
-        ty[0:-1:o, :] -= gy
-        phase = np.zeros((m, m), dtype=slopes.dtype)
-        for t, weight in enumerate(EDGE_WEIGHTS[o]):
-            phase[t : t + o * n : o, :] += weight * tx
-            phase[:, t : t + o * n : o] += weight * ty
+        """``G^T`` of slopes ``(2, n_valid)``: a pupil phase ``(m, m)`` (:func:`.kernels.edge_differences_adjoint`)."""
+        phase = np.empty((self.m, self.m), dtype=slopes.dtype)
+        weights = np.asarray(EDGE_WEIGHTS[self.oversampling], dtype=slopes.dtype)
+        side = slopes.dtype.type(self.subaperture_m)
+        kernels.edge_differences_adjoint(np.ascontiguousarray(slopes), *self._corners, weights, side, phase)
         return phase
 
 

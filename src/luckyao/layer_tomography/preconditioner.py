@@ -19,10 +19,12 @@ pupil and grid edges, the aliasing of the slopes' two-sample stride and the tilt
 """
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 import scipy.fft
 
+from . import kernels
 from .operators import MeasurementOperator
 from .prior import BiharmonicPrior
 
@@ -64,6 +66,16 @@ class FourierPreconditioner:
         system[..., np.arange(n_layers), np.arange(n_layers)] += np.moveaxis(prior_symbol, 0, -1)
         return cls(np.linalg.inv(system).astype(np.result_type(dtype, np.complex64)), n)
 
+    @cached_property
+    def _upper(self) -> tuple[np.ndarray, np.ndarray]:
+        """``inverse``'s upper triangle (it is Hermitian): the pairs ``(l, k)``, ``l <= k``
+        (n_pairs, 2), and their blocks (n_pairs, n, n//2+1), each block's frequencies contiguous."""
+        pairs = np.stack(np.triu_indices(self.inverse.shape[-1]), axis=1)
+        return pairs, np.ascontiguousarray(np.moveaxis(self.inverse[:, :, pairs[:, 0], pairs[:, 1]], -1, 0))
+
     def apply(self, residual: np.ndarray) -> np.ndarray:
-        spectrum = np.moveaxis(scipy.fft.rfft2(residual), 0, -1)[..., None]  # (n, n//2+1, L, 1)
-        return scipy.fft.irfft2(np.moveaxis(np.matmul(self.inverse, spectrum)[..., 0], -1, 0), s=(self.n, self.n))
+        """``M^-1 r`` of layers ``(n_layers, n, n)`` (:func:`.kernels.couple_layers` per frequency)."""
+        spectrum = scipy.fft.rfft2(residual).astype(self.inverse.dtype, copy=False)
+        coupled = np.empty_like(spectrum)
+        kernels.couple_layers(*self._upper, spectrum, coupled)
+        return scipy.fft.irfft2(coupled, s=(self.n, self.n), overwrite_x=True)

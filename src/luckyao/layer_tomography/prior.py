@@ -28,6 +28,7 @@ import numpy as np
 import scipy.sparse
 
 from ..tomography.prior import TurbulencePrior
+from . import kernels
 from .grids import LayerGrids
 
 VON_KARMAN_PSD_CONSTANT = 0.023
@@ -88,12 +89,19 @@ class BiharmonicPrior:
         return tuple(laplacian(self.grids.n, pitch, self.kappa0_per_m) for pitch in self.grids.pitches_m)
 
     def apply(self, layers: np.ndarray) -> np.ndarray:
-        """``C^-1 x`` for layers ``(n_layers, n, n)``."""
-        return (self._matrix @ layers.reshape(-1)).reshape(layers.shape)
+        """``C^-1 x`` for layers ``(n_layers, n, n)``, in ``dtype`` (:func:`.kernels.biharmonic`:
+        the Laplacian's stencil twice, the matrix unassembled)."""
+        layers = np.ascontiguousarray(layers, dtype=self.dtype)
+        scales, shifts, weights = self._stencil
+        out = np.empty_like(layers)
+        kernels.biharmonic(layers, scales, shifts, weights, out)
+        return out
 
     @cached_property
-    def _matrix(self) -> scipy.sparse.csr_matrix:
-        return self.matrix().astype(self.dtype)
+    def _stencil(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Per layer, in ``dtype``: ``1 / pitch^2`` [1/m^2], ``kappa_0^2`` [1/m^2], ``w_l`` [m^2]."""
+        kappa2 = np.full(self.grids.n_layers, self.kappa0_per_m**2)
+        return tuple(np.asarray(v, dtype=self.dtype) for v in (self.grids.pitches_m**-2.0, kappa2, self.weights))
 
     def matrix(self) -> scipy.sparse.csr_matrix:
         """``C^-1`` as a sparse block-diagonal matrix (small systems: tests, direct solves)."""
