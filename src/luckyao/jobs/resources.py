@@ -255,10 +255,11 @@ BUDGET_SHARE = 1.0
 """The residual budget's share of a step (``ao.residual_budget``: a noiseless twin of the LGS chain,
 the DM fits of the science and beacon phases and the parts' surfaces): +2.1 ms on the default AO
 case's 2.09 at 4.2 m, measured on a loaded machine (docs/performance.md)."""
-ITERATIVE_NS_PER_SAMPLE, ITERATIVE_ITERATIONS = 80.0, 60
+ITERATIVE_NS_PER_SAMPLE, ITERATIVE_ITERATIONS = 25.0, 30
 """The iterative tomography's time per PCG iteration and layer sample, and its iterations per
-exposure (warm-started): 6.5 ms per iteration on 9 layers of 96² (4.2 m, a loaded machine), 54-56
-iterations per exposure with Rayleigh beacons, 31-38 with sodium ones at 16 and 39 m (docs/performance.md)."""
+exposure (warm-started to 10^-3): with the compiled kernels 14-23 ns per sample (1.1-1.3 ms per
+iteration on 9 layers of 96² at 4.2 m, 6.5-7.6 ms on 9 x 192² at 39 m, a loaded machine) and
+16-24 warm iterations (the first, cold solve ~70-140): docs/performance.md."""
 SCREENS_NS_PER_SAMPLE = 141.0
 """One core's time per screen sample (the paper's 2.3e9 samples: 5.4 minutes of CPU)."""
 RECONSTRUCTOR_S_16, RECONSTRUCTOR_EXPONENT = 1.7, 1.33
