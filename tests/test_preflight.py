@@ -460,3 +460,30 @@ def test_every_job_has_a_time_estimate():
     steps = {job.name.split()[0] for job in jobs}
     assert steps == {"turbulence", "calibration", "reconstructor", "commands", "slopes", "simulate", "lucky"}
     assert all(job.seconds > 0 for job in jobs)
+
+
+@pytest.mark.parametrize("noisy", [False, True])
+def test_the_declared_partial_sums_are_those_a_lucky_run_allocates(noisy):
+    """``resources.partial_sums_bytes`` against the arrays :class:`.lucky.accumulation.PartialSums`
+    allocates for the same run (``cog``; a sub-pixel method's vector: test_registration.py): the
+    run's, the long exposure's and the time blocks' rows, with a noisy detector the image
+    criteria's rows for every block (the detector sweep's case ``lgs``)."""
+    from luckyao.lucky.accumulation import PartialSums, TimeBlocks
+    from luckyao.lucky.ranking import fraction_counts
+    from luckyao.studyspec.resolved import criteria_of
+
+    study = tiny()
+    study["lucky"]["registration"] = ["cog"]
+    if not noisy:
+        study["lucky"]["detectors"]["faint"] = {"photons_per_frame": None, "read_noise_e": 0.0}
+    study = expand_sweeps(study)
+    settings = resolve_study(study, validate_study(study)).cases["lgs" if noisy else "ltao"].lucky_settings
+    config = settings["case_config"]
+    n_frames, n_blocks = resources.frame_count(config), settings["error_blocks"]
+    n_det, n_crit = len(settings["detectors"]), len(criteria_of(config))
+    assert n_blocks >= 2 and any(d["photons_per_frame"] is not None for d in settings["detectors"].values()) == noisy
+    blocks = TimeBlocks(n_frames, n_blocks, settings["fractions"], n_det, n_crit)
+    sums = PartialSums(n_det, n_crit, fraction_counts(n_frames, settings["fractions"]), blocks, [0, 1] if noisy else [])
+    n = config["camera"]["n_pixels"]
+    sums.allocate((n, n), resources.FRAME_BLOCK)
+    assert resources.partial_sums_bytes(settings) == sums.detected_rows.nbytes + sums.noiseless_rows.nbytes

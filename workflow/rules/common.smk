@@ -9,6 +9,7 @@ from luckyao.io.datasets import atomic_path
 from luckyao.jobs.live_run import hold_shared
 from luckyao.jobs.resources import (
     CALIBRATION_BYTES,
+    TURBULENCE_THREADS,
     StudyTooLarge,
     checked_study,
     commands_memory_bytes,
@@ -307,15 +308,22 @@ def screens_priority(key):
     return max(simulate_priority(name) for name in users)
 
 
+def screens_threads(key):
+    """A screens job's threads: two layers at once (``TURBULENCE_THREADS``) when it is the study's
+    only screens job; one when there are several, so that they run side by side and none waits
+    for both cores while one-core jobs hold one (the same screens for any number)."""
+    return TURBULENCE_THREADS if len(TURBULENCE_BY_KEY) == 1 else 1
+
+
 def slopes_priority(key):
     """A slopes product's scheduling priority: that of the most urgent simulation waiting for it."""
     return max(simulate_priority(case) for case in SLOPES_CASES[key])
 
 
 def lucky_mem_mb(case):
-    """Memory a case's lucky job may hold [MB] at paper fidelity (10 time blocks): its
-    estimate as is (``resources.lucky_memory_bytes``: the sweep's 19 detectors, 4.7 GB
-    measured with ``cog`` alone; the partial sums once per registration method), at least 3 GB (a field's replay; its memory-mapped screens not counted).
+    """Memory a case's lucky job may hold [MB]: its estimate as is (``resources.lucky_memory_bytes``:
+    the partial sums from their layout; the paper sweep's 19 detectors, 4.7 GB measured with
+    ``cog`` alone), at least 3 GB (a field's replay; its memory-mapped screens not counted).
     """
     return mem_mb(lucky_memory_bytes(VIEW.cases[case].lucky_settings), 3000, margin=1.0)
 

@@ -10,9 +10,9 @@ rule turbulence:
     benchmark:
         "results/benchmarks/turbulence/{key}.tsv"
     priority: lambda w: screens_priority(w.key)  # the longest chains of work first
-    threads: 2  # two layers at once (independent draws: the same screens for any number)
+    threads: lambda w: screens_threads(w.key)  # 2 for a study's only screens job, else 1
     resources:
-        mem_mb=lambda w: mem_mb(turbulence_memory_bytes(TURBULENCE_BY_KEY[w.key])),  # paper fidelity: 15800
+        mem_mb=lambda w: mem_mb(turbulence_memory_bytes(TURBULENCE_BY_KEY[w.key], screens_threads(w.key))),  # paper fidelity: 15800
         runtime=15,  # minutes; paper fidelity: 5 measured
     params:
         spec=lambda w: canonical_json(TURBULENCE_BY_KEY[w.key]),

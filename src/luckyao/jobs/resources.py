@@ -17,9 +17,10 @@ paper-fidelity run (README, Paper fidelity):
   matrices and slopes it loads (with the iterative tomography, its layer grids, preconditioner
   and sparse projections instead: :func:`iterative_tomography_bytes`) and a block of frames; the
   frame cube it writes, 4 bytes per pixel of every imaged target's frames;
-* lucky: 1.5 GB and 0.21 GB of partial sums per detector for a 256-pixel camera at paper
-  fidelity (the sweep's 19 detectors, ``cog`` alone: 4.7 GB measured), the partial sums
-  scaling with the camera's pixels; a sub-pixel registration method's ~1/8 of that more.
+* lucky: 1.5 GB and its partial sums, from their layout (the sweep's 19 detectors at paper
+  fidelity, ``cog`` alone: 4.7 GB measured, 4.74 estimated); a sub-pixel registration method's
+  ~1/8 of a whole frame's more; replaying the frames, their block and the DM commands (the
+  screens memory-mapped, as in every job: file cache, not counted).
 
 Each rule declares ``mem_mb`` from the same estimate (``mem_mb``: x ``MARGIN``, at
 least the rule's measured paper-fidelity need; lucky's estimate is its measured
@@ -69,9 +70,9 @@ def screens_bytes(spec: dict) -> float:
     return 4.0 * sum(screens_samples(spec))
 
 
-def turbulence_memory_bytes(spec: dict) -> float:
-    """The turbulence job: 12 bytes per sample of the layers made at once (the largest)."""
-    largest = sorted(screens_samples(spec), reverse=True)[:TURBULENCE_THREADS]
+def turbulence_memory_bytes(spec: dict, threads: int = TURBULENCE_THREADS) -> float:
+    """The turbulence job: 12 bytes per sample of the layers made at once (``threads``: the largest)."""
+    largest = sorted(screens_samples(spec), reverse=True)[:threads]
     return BASE_BYTES + 12.0 * sum(largest)
 
 
@@ -194,29 +195,61 @@ crop, the encircled energy's 4,357 radial sums and the flux per frame, for the 4
 no FFT code; tests/test_registration.py checks it against the layout."""
 
 
-MEASURED_FRACTIONS = 9
-"""The fractions of ``lucky.fractions`` (the default's) with which a lucky job's sums were measured."""
+LUCKY_BASE_BYTES = 1.5e9
+"""A lucky job's memory besides its partial sums: the interpreter, the per-frame values and
+bins, a chunk of frames and their spectra (4.7 GB measured at paper fidelity with the sweep's 19
+detectors and ``cog``, of which the sums are 3.2 GB)."""
 
-MEASURED_CRITERIA = 5
-"""The criteria of the AO cases whose lucky jobs' sums were measured (``strehl``, ``d50``, ``lgs_rms``,
-``lgs_residual_rms``, ``true_rms``): every case's at most, but with ``ao.laser_criteria``."""
+
+def partial_sums_bytes(settings: dict) -> float:
+    """The partial sums a lucky job holds (:class:`.lucky.accumulation.PartialSums`, float64 rows of
+    an item + 8 values, per detector and registration method, all held at once: the methods share
+    the passes over the frames): the run's (criterion, fraction) rows, twice (detected and the
+    noiseless twin's), the long exposure, and the time blocks' rows: a set of rows per criterion
+    for the blocks a chunk of :data:`FRAME_BLOCK` frames spans, or, with a noisy detector, the
+    image criteria (Strehl, d50: their guessed bins corrected until the last chunk) a set for
+    every block. An item is a whole frame for ``cog``, :data:`SUBPIXEL_SUMS_FRACTION` of it for a
+    sub-pixel method's vector."""
+    from ..lucky.ranking import fraction_counts  # numpy only
+
+    case, fractions = settings["case_config"], settings["fractions"]
+    n_frames, n_blocks = frame_count(case), settings.get("error_blocks", 0)
+    n_crit, n_bins = len(criteria_of(case)), len(set(fraction_counts(n_frames, fractions).tolist()))
+    noisy = any(d["photons_per_frame"] is not None for d in settings["detectors"].values())
+    n_resident = 2 if noisy else 0
+    block_rows = 0
+    if n_blocks:
+        block_frames = n_frames // n_blocks
+        n_sets = min(n_blocks, -(-FRAME_BLOCK // block_frames) + 1)
+        block_bins = len(set(fraction_counts(max(block_frames, 1), fractions).tolist()))
+        block_rows = (n_sets * (n_crit - n_resident) + n_blocks * n_resident) * block_bins
+    rows = 2 * n_crit * n_bins + 1 + block_rows
+    pixels = case["camera"]["n_pixels"] ** 2
+    items = sum(pixels if name == "cog" else SUBPIXEL_SUMS_FRACTION * pixels for name in registrations(settings))
+    return 8.0 * len(settings["detectors"]) * rows * (items + 8 * len(registrations(settings)))
+
+
+def replay_memory_bytes(case: dict) -> float:
+    """A lucky job's replay of the frames (``replay_frames``) besides its memory-mapped screens:
+    the simulation's block of frames (float32, three arrays of every target's) and the recorded
+    DM commands (float32, every WFS exposure's)."""
+    block = 3 * 4.0 * len(case["targets_arcsec"]) * FRAME_BLOCK * case["camera"]["n_pixels"] ** 2
+    commands = 0.0
+    if case["ao"]["mode"] != "none":
+        commands = 4.0 * case["ao"]["n_actuators"] ** 2 * FrameClock.from_config(case).n_exposures
+    return block + commands
 
 
 def lucky_memory_bytes(settings: dict) -> float:
-    """A case's post-processing (``studyspec.lucky.lucky_settings``): 1.5 GB and, per detector and
-    registration method (their sums all held at once: the methods share the passes over the
-    frames), 0.21 GB of partial sums of whole frames for a 256-pixel camera (``cog``), or
-    :data:`SUBPIXEL_SUMS_FRACTION` of that for a sub-pixel method, for the 9 fractions of
-    ``lucky.fractions`` and the at most :data:`MEASURED_CRITERIA` criteria they were measured with
-    (the sums hold one image per fraction and criterion: ``ao.laser_criteria`` adds up to 6); replaying
-    the frames (``replay_frames``), the simulation's memory besides (its block of frames, the DM
-    commands); Fourier lucky imaging's amplitudes (:func:`fourier_memory_bytes`)."""
+    """A case's post-processing (``studyspec.lucky.lucky_settings``): :data:`LUCKY_BASE_BYTES`, its
+    partial sums (:func:`partial_sums_bytes`), replaying the frames (``replay_frames``) their block
+    and the DM commands (:func:`replay_memory_bytes`: the screens are memory-mapped, pages of the
+    file cache the kernel may drop and read again), Fourier lucky imaging's amplitudes
+    (:func:`fourier_memory_bytes`). The 16 m detector sweep: 10.2 GB (8.2 GB of its own measured
+    mid-run; 15.0 GB by the scaled estimate this replaced)."""
     case = settings["case_config"]
-    pixels = (case["camera"]["n_pixels"] / 256) ** 2 * len(settings["fractions"]) / MEASURED_FRACTIONS
-    pixels *= max(1.0, len(criteria_of(case)) / MEASURED_CRITERIA)
-    methods = sum(1.0 if name == "cog" else SUBPIXEL_SUMS_FRACTION for name in registrations(settings))
-    replay = simulate_memory_bytes(case) if settings.get("replay_frames", False) else 0.0
-    return 1.5e9 + 0.21e9 * pixels * len(settings["detectors"]) * methods + replay + fourier_memory_bytes(settings)
+    replay = replay_memory_bytes(case) if settings.get("replay_frames", False) else 0.0
+    return LUCKY_BASE_BYTES + partial_sums_bytes(settings) + replay + fourier_memory_bytes(settings)
 
 
 def fourier_memory_bytes(settings: dict) -> float:
