@@ -269,10 +269,12 @@ def sized_study(
     return study, validate_study(sized)["sized"]
 
 
-def measure_products(config_path: str, diameter_m: float, folder: str, system: str, method: str) -> dict:
+def measure_products(
+    config_path: str, diameter_m: float, folder: str, system: str, method: str, draws: int = CALIBRATION_DRAWS
+) -> dict:
     """Build the reconstructor, then the command matrix (each timed, with the peak RSS after it;
-    none with the iterative tomography), and save them with the case's WFS calibration (few draws,
-    timed) to ``folder`` for the loop."""
+    none with the iterative tomography), and save them with the case's WFS calibration (``draws``
+    draws, timed) to ``folder`` for the loop."""
     study, config = sized_study(config_path, diameter_m, system, method)
     out = {"reconstructor_s": None, "reconstructor_peak_gb": None, "commands_s": None}
     if reconstructor_spec(config) is not None:
@@ -285,10 +287,10 @@ def measure_products(config_path: str, diameter_m: float, folder: str, system: s
         np.save(Path(folder) / "reconstructors.npy", reconstructors)
         np.save(Path(folder) / "command_matrix.npy", commands["command_matrix"].values)
         np.save(Path(folder) / "dm_slopes.npy", commands["dm_slopes"].values)
-    spec = calibration_spec(study, deep_merge(config, {"wfs": {"calibration_draws": CALIBRATION_DRAWS}}))
+    spec = calibration_spec(study, deep_merge(config, {"wfs": {"calibration_draws": int(draws)}}))
     start = time.perf_counter()
     calibration = build_calibration(spec)
-    out.update(calibration_s=time.perf_counter() - start, products_peak_gb=peak_rss_gb())
+    out.update(calibration_s=time.perf_counter() - start, calibration_draws=int(draws), products_peak_gb=peak_rss_gb())
     calibration.to_netcdf(Path(folder) / "calibration.nc")
     return out
 
@@ -354,7 +356,9 @@ def child(stage: str, *args) -> dict:
     return json.loads(done.stdout.strip().splitlines()[-1])
 
 
-def main_sizes(config_path: str, diameters, repeats: int, system: str, method: str, n_steps: int) -> None:
+def main_sizes(
+    config_path: str, diameters, repeats: int, system: str, method: str, n_steps: int, draws: int = CALIBRATION_DRAWS
+) -> None:
     rows = {}
     for diameter_m in diameters:
         study, config = sized_study(config_path, diameter_m, system, method)
@@ -367,7 +371,7 @@ def main_sizes(config_path: str, diameters, repeats: int, system: str, method: s
             )
         with tempfile.TemporaryDirectory() as folder:
             row = {"diameter_m": diameter_m, **case_files_gb(config_path, diameter_m, system, method)}
-            row.update(child("products", config_path, diameter_m, folder, system, method))
+            row.update(child("products", config_path, diameter_m, folder, system, method, draws))
             row.update(child("loop", config_path, diameter_m, folder, repeats, system, method, n_steps))
         rows[diameter_m] = row
         print("size " + json.dumps(row), flush=True)
@@ -386,13 +390,14 @@ def main_sizes(config_path: str, diameters, repeats: int, system: str, method: s
             f"{_value(r['pcg_iterations_per_exposure'], '.1f')} | {r['loop_peak_gb']:.2f} |"
         )
     print(
-        "| D [m] | screens made [s] | WFS calibration [s] | reconstructor [s] | command matrix [s] | "
+        "| D [m] | screens made [s] | WFS calibration [s] (draws) | reconstructor [s] | command matrix [s] | "
         "products' peak RSS [GB] | frames [GB] | screens [GB] |"
     )
     print("|---|---|---|---|---|---|---|---|")
     for d, r in rows.items():
         print(
-            f"| {d:g} | {r['screens_s']:.1f} | {r['calibration_s']:.1f} | {_value(r['reconstructor_s'], '.1f')} | "
+            f"| {d:g} | {r['screens_s']:.1f} | {r['calibration_s']:.1f} ({r['calibration_draws']}) | "
+            f"{_value(r['reconstructor_s'], '.1f')} | "
             f"{_value(r['commands_s'], '.1f')} | {r['products_peak_gb']:.2f} | {r['frames_gb']:.2f} "
             f"({r['frames_s']:g} s) | {r['screens_gb']:.2f} |"
         )
@@ -451,6 +456,9 @@ if __name__ == "__main__":
         "--method", choices=["dense", "iterative"], default="dense", help="the default system's tomography"
     )
     parser.add_argument("--steps", type=int, default=N_STEPS, help="steps of the size benchmark's stage timing")
+    parser.add_argument(
+        "--calibration-draws", type=int, default=CALIBRATION_DRAWS, help="the size benchmark's WFS calibration draws"
+    )
     parser.add_argument("--stage", nargs="+", help=argparse.SUPPRESS)  # a child process of the size benchmark
     args = parser.parse_args()
     if args.stage:
@@ -462,6 +470,8 @@ if __name__ == "__main__":
             result = measure_loop(config_path, float(diameter), folder, int(repeats), system, method, int(n_steps))
         print(json.dumps(result))
     elif args.diameters:
-        main_sizes(args.config, args.diameters, args.repeats, args.system, args.method, args.steps)
+        main_sizes(
+            args.config, args.diameters, args.repeats, args.system, args.method, args.steps, args.calibration_draws
+        )
     else:
         main(args.config)

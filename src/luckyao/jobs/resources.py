@@ -11,6 +11,8 @@ paper-fidelity run (README, Paper fidelity):
   (2 x 8 n_slopes^2), the cross covariances and results (24 bytes per point and
   slope; the command matrix's points a quarter of the DM pitch apart) and the file,
   with n_slopes = 2 x beacons x the sub-apertures in the pupil's disk;
+* WFS calibration: 1.5 GB, or a draw's screen (56 bytes per sample) and the sub-apertures'
+  spectra where more (:func:`calibration_memory_bytes`: 6.4 GB for the 39 m case's 12" field);
 * slopes: ``SIMULATE_BYTES`` (the sensor's screens memory-mapped) plus the slopes it
   holds and writes, 4 bytes per slope of every WFS exposure;
 * simulate: ``SIMULATE_BYTES`` measured (the screens are memory-mapped) plus the
@@ -284,9 +286,13 @@ WFS_SUBAPERTURE_NS, WFS_SAMPLES_EXPONENT, MEASURED_WFS_SAMPLES = 1406.0, 4.6, 16
 samples across a sub-aperture (the default AO case's 0.27 ms per step for 4 x 48), and its power of
 those samples: 0.19, 3.0, 13.0 and 79 ms per step measured at 4.2 m for 6 sodium beacons x 48
 sub-apertures with 14, 26, 34 and 52 samples (WFS fields of 3.36, 6, 8 and 12"; a loaded machine)."""
-CALIBRATION_SCREEN_NS = 40.0
-"""A calibration draw's time per screen sample (normal deviates, product, complex FFT): an
-estimate, not measured apart (the default's draws are 512^2, a fraction of its 13 s)."""
+CALIBRATION_SCREEN_NS = 70.0
+"""A calibration draw's time per screen sample (normal deviates, product, complex FFT): 0.29 s per
+2048^2 draw measured (4.2 m, the 12" WFS field; a loaded machine)."""
+ELONGATION_OTF_NS = 14000.0
+"""The sensor's set-up, its LGS elongation OTF: time per valid sub-aperture and OTF sample
+(``M (M/2 + 1)``, ``M`` twice the sub-aperture's pupil samples), with the sodium profile: 3.7 s
+measured for 48 sub-apertures with ``M`` = 104 (4.2 m, the 12" WFS field)."""
 LUCKY_FRAME_MS = 0.9
 """A lucky job's ms per frame and target with the noiseless detector and ``cog`` alone, 256
 pixels (22.8 s for 25,000 frames and 10 blocks)."""
@@ -348,9 +354,17 @@ def lgs_chain_ms(case: dict) -> float:
     return case["lgs"]["n_beacons"] * valid_subapertures(case) * per_subaperture_ns / 1e6
 
 
+def elongation_otf_seconds(spec: dict) -> float:
+    """The sensor's set-up: its LGS elongation OTF (:data:`ELONGATION_OTF_NS`), of a case or
+    calibration spec."""
+    m = 2 * wfs_pupil_samples(spec) // spec["wfs"]["n_subapertures"]
+    return valid_subapertures(spec) * m * (m // 2 + 1) * ELONGATION_OTF_NS * 1e-9
+
+
 def slopes_seconds(case: dict) -> float:
-    """An LGS slopes product: the LGS chain (:func:`lgs_chain_ms`) at every step."""
-    return FrameClock.from_config(case).n_steps * lgs_chain_ms(case) / 1e3
+    """An LGS slopes product: the sensor's set-up (:func:`elongation_otf_seconds`) and the LGS chain
+    (:func:`lgs_chain_ms`) at every step."""
+    return elongation_otf_seconds(case) + FrameClock.from_config(case).n_steps * lgs_chain_ms(case) / 1e3
 
 
 def slopes_minutes(case: dict) -> int:
@@ -380,13 +394,13 @@ def calibration_memory_bytes(spec: dict) -> float:
 
 
 def calibration_seconds(spec: dict) -> float:
-    """A WFS calibration: :data:`CALIBRATION_S` (compiling, small sensors) and each draw's screen
-    (:data:`CALIBRATION_SCREEN_NS` per sample) and its 4 one-step exposures of up to 4 beacons
-    (:func:`wfs_step_ns` per sub-aperture)."""
+    """A WFS calibration: :data:`CALIBRATION_S` (compiling, small sensors), the sensor's set-up
+    (:func:`elongation_otf_seconds`) and each draw's screen (:data:`CALIBRATION_SCREEN_NS` per
+    sample) and its 4 one-step exposures of up to 4 beacons (:func:`wfs_step_ns` per sub-aperture)."""
     screen = calibration_screen_size(wfs_pupil_samples(spec)) ** 2
     sensor = 4 * min(spec["lgs"]["n_beacons"], 4) * valid_subapertures(spec) * wfs_step_ns(spec)
     draws = spec["wfs"].get("calibration_draws", case_defaults("wfs")["calibration_draws"])
-    return CALIBRATION_S + draws * (CALIBRATION_SCREEN_NS * screen + sensor) * 1e-9
+    return CALIBRATION_S + elongation_otf_seconds(spec) + draws * (CALIBRATION_SCREEN_NS * screen + sensor) * 1e-9
 
 
 def calibration_minutes(spec: dict) -> int:
