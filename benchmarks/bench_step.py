@@ -320,7 +320,11 @@ def measure_loop(
         xr.load_dataset(Path(folder) / "calibration.nc"),
     )
     case = Case.from_config(config)
+    wall, cpu = time.perf_counter(), time.process_time()
     spent, iterations = stages(case, screens, *products_, n_steps=n_steps)
+    # this process's share of a core while timed (below 1 on a loaded machine: the stages' wall
+    # times then overstate one core's)
+    out["stages_cpu_share"] = (time.process_time() - cpu) / (time.perf_counter() - wall)
     out["stage_ms"] = {name: 1e3 * seconds / n_steps for name, seconds in spent.items()}
     out["stages_ms_per_step"] = sum(out["stage_ms"].values())
     out["pcg_iterations_per_exposure"] = float(np.mean(iterations)) if iterations else None
@@ -376,6 +380,7 @@ def main_sizes(
         rows[diameter_m] = row
         print("size " + json.dumps(row), flush=True)
     print(f"system {system}, {n_steps} steps per stage timing, single thread")
+    print("share of a core while timed: " + ", ".join(f"{d:g} m {r['stages_cpu_share']:.2f}" for d, r in rows.items()))
     print(
         "| D [m] | WFS | DM | camera px | tomography | "
         + " | ".join(STAGES)
