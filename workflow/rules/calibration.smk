@@ -12,8 +12,8 @@ rule calibration:
     priority: 10  # before the screens: the simulations that use it wait for it
     threads: 1
     resources:
-        mem_mb=mem_mb(CALIBRATION_BYTES, margin=1.0),
-        runtime=5,  # minutes
+        mem_mb=lambda w: mem_mb(calibration_memory_bytes(CALIBRATION_BY_KEY[w.wkey]), margin=1.0),
+        runtime=lambda w: calibration_minutes(CALIBRATION_BY_KEY[w.wkey]),  # minutes; at least 5
     params:
         spec=lambda w: canonical_json(CALIBRATION_BY_KEY[w.wkey]),
     shell:

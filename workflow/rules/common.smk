@@ -8,8 +8,9 @@ from luckyao.jobs.code_deps import step_sources
 from luckyao.io.datasets import atomic_path
 from luckyao.jobs.live_run import hold_shared
 from luckyao.jobs.resources import (
-    CALIBRATION_BYTES,
     TURBULENCE_THREADS,
+    calibration_memory_bytes,
+    calibration_minutes,
     StudyTooLarge,
     checked_study,
     commands_memory_bytes,
@@ -22,6 +23,7 @@ from luckyao.jobs.resources import (
     simulate_memory_bytes,
     simulate_minutes,
     simulate_seconds,
+    slopes_minutes,
     slopes_seconds,
     slopes_memory_bytes,
     turbulence_memory_bytes,
@@ -283,7 +285,7 @@ def chain_seconds(name):
     """A case's estimated work after its screens [s on one core]: its LGS slopes product, its
     simulation and its lucky job (jobs/resources.py)."""
     slopes = slopes_seconds(CASES[name]) if VIEW.cases[name].slopes is not None else 0.0
-    return slopes + simulate_seconds(CASES[name]) + lucky_seconds(VIEW.cases[name].lucky_settings)
+    return slopes + simulate_seconds(CASES[name], LGS_TWIN[name]) + lucky_seconds(VIEW.cases[name].lucky_settings)
 
 
 CHAIN_SECONDS = {name: chain_seconds(name) for name in CASES}

@@ -17,7 +17,7 @@ rule lgs_slopes:
     threads: 1
     resources:
         mem_mb=lambda w: mem_mb(slopes_memory_bytes(CASES[SLOPES_CASES[w.skey][0]]), 3000),
-        runtime=60,  # minutes; paper fidelity: about half an LTAO simulation
+        runtime=lambda w: slopes_minutes(CASES[SLOPES_CASES[w.skey][0]]),  # paper fidelity: about half an LTAO simulation
     params:
         spec=lambda w: canonical_json(SLOPES_BY_KEY[w.skey]),
         calibration=lambda w, input: ["--calibration", input.calibration] if input.calibration else [],
@@ -54,8 +54,8 @@ rule simulate:
     threads: 1
     resources:
         # paper fidelity: 2-3 GB measured (the screens are memory-mapped)
-        mem_mb=lambda w: mem_mb(simulate_memory_bytes(CASES[w.case]), 4000),
-        runtime=lambda w: simulate_minutes(CASES[w.case]),  # paper fidelity: 4-10 per target, 30 for a 7-target field
+        mem_mb=lambda w: mem_mb(simulate_memory_bytes(CASES[w.case], LGS_TWIN[w.case]), 4000),
+        runtime=lambda w: simulate_minutes(CASES[w.case], LGS_TWIN[w.case]),  # paper fidelity: 4-10 per target, 30 for a 7-target field
     params:
         case=lambda w: canonical_json(CASES[w.case]),
         seed=STUDY["seed"],

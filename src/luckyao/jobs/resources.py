@@ -11,6 +11,8 @@ paper-fidelity run (README, Paper fidelity):
   (2 x 8 n_slopes^2), the cross covariances and results (24 bytes per point and
   slope; the command matrix's points a quarter of the DM pitch apart) and the file,
   with n_slopes = 2 x beacons x the sub-apertures in the pupil's disk;
+* WFS calibration: 1.5 GB, or a draw's screen (56 bytes per sample) and the sub-apertures'
+  spectra where more (:func:`calibration_memory_bytes`: 6.4 GB for the 39 m case's 12" field);
 * slopes: ``SIMULATE_BYTES`` (the sensor's screens memory-mapped) plus the slopes it
   holds and writes, 4 bytes per slope of every WFS exposure;
 * simulate: ``SIMULATE_BYTES`` measured (the screens are memory-mapped) plus the
@@ -42,11 +44,12 @@ from ..steps.screens import TurbulenceSpec, strip_specs
 from ..studyspec.lucky import registrations
 from ..studyspec.products import commands_spec, iterative, reconstructor_spec
 from ..studyspec.resolved import criteria_of, imaged_targets
-from ..studyspec.schema import ConfigError
+from ..studyspec.schema import ConfigError, case_defaults
 from ..studyspec.study import validate_study
 from ..studyspec.sweeps import expand_sweeps
 from ..studyspec.view import ResolvedStudy, resolve_study
 from ..units import ARCSEC_RAD
+from ..wfs.sampling import calibration_screen_size, samples_per_subaperture
 
 BASE_BYTES = 0.4e9
 """Python with numpy, scipy, numba and pyFFTW loaded."""
@@ -116,8 +119,20 @@ def slopes_bytes(case: dict) -> float:
     return 4.0 * n_slopes * FrameClock.from_config(case).n_exposures
 
 
+def sensor_bytes(case: dict) -> float:
+    """The LGS sensor's own arrays: its exposure's downlink phases (float32, every beacon's pupil grid
+    and step) and, while its elongation OTF is built, four complex128 arrays of every valid
+    sub-aperture's OTF samples (``M (M/2 + 1)``: 1.4 GB at 39 m with the 12" field)."""
+    n = wfs_pupil_samples(case)
+    m = 2 * n // case["wfs"]["n_subapertures"]
+    downlink = 4.0 * case["wfs"]["exposure_steps"] * case["lgs"]["n_beacons"] * n * n
+    return downlink + 4 * 16.0 * valid_subapertures(case) * m * (m // 2 + 1)
+
+
 def slopes_memory_bytes(case: dict) -> float:
-    return SIMULATE_BYTES + slopes_bytes(case)
+    """An LGS slopes product: the simulation's measured own memory, its sensor's arrays
+    (:func:`sensor_bytes`) and the slopes it writes."""
+    return SIMULATE_BYTES + sensor_bytes(case) + slopes_bytes(case)
 
 
 def frames_bytes(case: dict) -> float:
@@ -174,15 +189,22 @@ def iterative_tomography_bytes(case: dict) -> float:
     return layer_bytes + preconditioner + traces
 
 
-def simulate_memory_bytes(case: dict) -> float:
+def runs_layer_tomography(case: dict, lgs_twin: str | None = None) -> bool:
+    """Whether a case's simulation builds and runs the iterative tomography: with LGS and
+    ``tomography.method: iterative``, unless a no-AO case's ``lgs_rms`` comes from its
+    ``lgs_twin`` (``studyspec.products.lgs_twin``)."""
+    return case["lgs"]["enabled"] and iterative(case) and lgs_twin is None
+
+
+def simulate_memory_bytes(case: dict, lgs_twin: str | None = None) -> float:
     """A simulation: its measured own memory, the matrices and slopes it loads (or the iterative
-    tomography it builds), a block of frames."""
+    tomography it builds: :func:`runs_layer_tomography`), a block of frames."""
     matrices = 0.0
     if (spec := reconstructor_spec(case)) is not None:
         matrices += reconstructor_bytes(spec)
     if (spec := commands_spec(case)) is not None:
         matrices += commands_bytes(spec) + slopes_bytes(case)
-    if case["lgs"]["enabled"] and iterative(case):
+    if runs_layer_tomography(case, lgs_twin):
         matrices += iterative_tomography_bytes(case) + (slopes_bytes(case) if case["ao"]["mode"] != "none" else 0.0)
     block = 3 * 4.0 * len(case["targets_arcsec"]) * FRAME_BLOCK * case["camera"]["n_pixels"] ** 2
     return SIMULATE_BYTES + matrices + block
@@ -281,9 +303,6 @@ STEP_MS_8M, STEP_EXPONENT = 5.4, 2.8
 (1.24 ms at 4.2 m, 5.36 at 8.2, 35-75 at 16 m measured: docs/performance.md)."""
 IMAGING_SHARE = 0.45
 """The science path's share of a step (propagation, DM surface, image; 8.2 m): what a replay redoes."""
-LGS_SHARE = 0.63
-"""The LGS chain's share of a step (4 beacons' propagation 0.52 and WFS 0.27 of the default AO
-case's 1.26 ms at 4.2 m): what a slopes product measures."""
 BUDGET_SHARE = 1.0
 """The residual budget's share of a step (``ao.residual_budget``: a noiseless twin of the LGS chain,
 the DM fits of the science and beacon phases and the parts' surfaces): +2.1 ms on the default AO
@@ -304,6 +323,22 @@ across (0.4 s with 9x9, 0.1 with 6x6 measured)."""
 CALIBRATION_S = 13.0
 """A WFS calibration [s]: the default study's six took 77 s, mostly numba compiling the WFS
 kernels of each size the first time (cached later)."""
+LGS_PROPAGATION_NS = 10.6
+"""The LGS propagation's time per beacon, pupil sample of its valid sub-apertures and step: the
+default AO case's 0.52 ms per step for 4 beacons x 48 sub-apertures x 16^2 samples (8.1 ms
+measured, 8.3 from this, for 6 x 48 x 52^2: the 12" WFS field at 4.2 m)."""
+WFS_SUBAPERTURE_NS, WFS_SAMPLES_EXPONENT, MEASURED_WFS_SAMPLES = 1406.0, 4.6, 16
+"""The WFS's time per beacon, valid sub-aperture and step with :data:`MEASURED_WFS_SAMPLES` pupil
+samples across a sub-aperture (the default AO case's 0.27 ms per step for 4 x 48), and its power of
+those samples: 0.19, 3.0, 13.0 and 79 ms per step measured at 4.2 m for 6 sodium beacons x 48
+sub-apertures with 14, 26, 34 and 52 samples (WFS fields of 3.36, 6, 8 and 12"; a loaded machine)."""
+CALIBRATION_SCREEN_NS = 70.0
+"""A calibration draw's time per screen sample (normal deviates, product, complex FFT): 0.29 s per
+2048^2 draw measured (4.2 m, the 12" WFS field; a loaded machine)."""
+ELONGATION_OTF_NS = 14000.0
+"""The sensor's set-up, its LGS elongation OTF: time per valid sub-aperture and OTF sample
+(``M (M/2 + 1)``, ``M`` twice the sub-aperture's pupil samples), with the sodium profile: 3.7 s
+measured for 48 sub-apertures with ``M`` = 104 (4.2 m, the 12" WFS field)."""
 LUCKY_FRAME_MS = 0.9
 """A lucky job's ms per frame and target with the noiseless detector and ``cog`` alone, 256
 pixels (22.8 s for 25,000 frames and 10 blocks)."""
@@ -343,34 +378,107 @@ def commands_seconds(spec: dict) -> float:
     return COMMANDS_S_17 * (spec["ao"]["n_actuators"] / 17) ** COMMANDS_EXPONENT
 
 
+def valid_subapertures(case: dict) -> float:
+    """About the LGS WFS's valid sub-apertures: those of the annulus' area."""
+    telescope, n_sub = case["telescope"], case["wfs"]["n_subapertures"]
+    return math.pi / 4 * n_sub**2 * (1 - (telescope["obscuration_m"] / telescope["diameter_m"]) ** 2)
+
+
+def wfs_step_ns(case: dict) -> float:
+    """The WFS's time per beacon and valid sub-aperture [ns] of a step (or of a one-step exposure):
+    :data:`WFS_SUBAPERTURE_NS` at its pupil samples across a sub-aperture, their power
+    :data:`WFS_SAMPLES_EXPONENT`."""
+    n_s = wfs_pupil_samples(case) / case["wfs"]["n_subapertures"]
+    return WFS_SUBAPERTURE_NS * (n_s / MEASURED_WFS_SAMPLES) ** WFS_SAMPLES_EXPONENT
+
+
+def lgs_chain_ms(case: dict) -> float:
+    """One core's ms per step of the LGS chain: every beacon's propagation to its valid
+    sub-apertures' pupil samples (:data:`LGS_PROPAGATION_NS`) and its WFS (:func:`wfs_step_ns`)."""
+    n_s = wfs_pupil_samples(case) / case["wfs"]["n_subapertures"]
+    per_subaperture_ns = LGS_PROPAGATION_NS * n_s**2 + wfs_step_ns(case)
+    return case["lgs"]["n_beacons"] * valid_subapertures(case) * per_subaperture_ns / 1e6
+
+
+def elongation_otf_seconds(spec: dict) -> float:
+    """The sensor's set-up: its LGS elongation OTF (:data:`ELONGATION_OTF_NS`), of a case or
+    calibration spec."""
+    m = 2 * wfs_pupil_samples(spec) // spec["wfs"]["n_subapertures"]
+    return valid_subapertures(spec) * m * (m // 2 + 1) * ELONGATION_OTF_NS * 1e-9
+
+
 def slopes_seconds(case: dict) -> float:
-    """An LGS slopes product: the LGS chain (:data:`LGS_SHARE` of a step, per 4 beacons) at every step."""
-    beacons = case["lgs"]["n_beacons"] / 4
-    return FrameClock.from_config(case).n_steps * LGS_SHARE * beacons * step_ms(case) / 1e3
+    """An LGS slopes product: the sensor's set-up (:func:`elongation_otf_seconds`) and the LGS chain
+    (:func:`lgs_chain_ms`) at every step."""
+    return elongation_otf_seconds(case) + FrameClock.from_config(case).n_steps * lgs_chain_ms(case) / 1e3
 
 
-def iterative_seconds(case: dict) -> float:
-    """The iterative tomography's solves (0 for a dense case or without LGS): every WFS exposure's
-    :data:`ITERATIVE_ITERATIONS` iterations at :data:`ITERATIVE_NS_PER_SAMPLE` per layer sample."""
-    if not (case["lgs"]["enabled"] and iterative(case)):
+def slopes_minutes(case: dict) -> int:
+    """An LGS slopes product's wall time to declare [min]: at least the 60 of paper fidelity
+    (about half an LTAO simulation), else :data:`RUNTIME_MARGIN` x :func:`slopes_seconds`."""
+    return max(60, math.ceil(RUNTIME_MARGIN * slopes_seconds(case) / 60))
+
+
+def wfs_pupil_samples(spec: dict) -> int:
+    """Samples across the LGS WFS's pupil grid of a case or calibration spec (sub-apertures x
+    ``wfs.sampling.samples_per_subaperture``)."""
+    n_sub, wfs = spec["wfs"]["n_subapertures"], spec["wfs"]
+    subaperture_m = spec["telescope"]["diameter_m"] / n_sub
+    pixel_scale_rad = wfs["pixel_scale_arcsec"] * ARCSEC_RAD
+    return n_sub * samples_per_subaperture(subaperture_m, wfs["n_pixels"], pixel_scale_rad, spec["lgs"]["wavelength_m"])
+
+
+def calibration_memory_bytes(spec: dict) -> float:
+    """A WFS calibration: :data:`CALIBRATION_BYTES` (what small sensors declare), or more: the
+    libraries, a draw's screen (its amplitudes, normal deviates, spectrum and transform: 56 bytes
+    per sample) and an exposure's sub-aperture spectra (complex64, 3 arrays, up to 4 beacons)."""
+    n, n_sub = wfs_pupil_samples(spec), spec["wfs"]["n_subapertures"]
+    screen = calibration_screen_size(n) ** 2
+    m = 2 * n // n_sub  # FFT samples per sub-aperture (the sensor's fft_size, the launch aside)
+    spectra = 3 * 8.0 * min(spec["lgs"]["n_beacons"], 4) * math.pi / 4 * n_sub**2 * m * (m // 2 + 1)
+    return max(CALIBRATION_BYTES, BASE_BYTES + 56.0 * screen + spectra)
+
+
+def calibration_seconds(spec: dict) -> float:
+    """A WFS calibration: :data:`CALIBRATION_S` (compiling, small sensors), the sensor's set-up
+    (:func:`elongation_otf_seconds`) and each draw's screen (:data:`CALIBRATION_SCREEN_NS` per
+    sample) and its 4 one-step exposures of up to 4 beacons (:func:`wfs_step_ns` per sub-aperture)."""
+    screen = calibration_screen_size(wfs_pupil_samples(spec)) ** 2
+    sensor = 4 * min(spec["lgs"]["n_beacons"], 4) * valid_subapertures(spec) * wfs_step_ns(spec)
+    draws = spec["wfs"].get("calibration_draws", case_defaults("wfs")["calibration_draws"])
+    return CALIBRATION_S + elongation_otf_seconds(spec) + draws * (CALIBRATION_SCREEN_NS * screen + sensor) * 1e-9
+
+
+def calibration_minutes(spec: dict) -> int:
+    """A WFS calibration's wall time to declare [min]: at least 5, else :data:`RUNTIME_MARGIN` x
+    :func:`calibration_seconds`."""
+    return max(5, math.ceil(RUNTIME_MARGIN * calibration_seconds(spec) / 60))
+
+
+def iterative_seconds(case: dict, lgs_twin: str | None = None) -> float:
+    """The iterative tomography's solves (0 unless :func:`runs_layer_tomography`): every WFS
+    exposure's :data:`ITERATIVE_ITERATIONS` iterations at :data:`ITERATIVE_NS_PER_SAMPLE` per layer
+    sample."""
+    if not runs_layer_tomography(case, lgs_twin):
         return 0.0
     n_layers, n = layer_grid_samples(case)
     exposure_s = ITERATIVE_ITERATIONS * ITERATIVE_NS_PER_SAMPLE * 1e-9 * n_layers * n * n
     return FrameClock.from_config(case).n_exposures * exposure_s
 
 
-def simulate_seconds(case: dict) -> float:
+def simulate_seconds(case: dict, lgs_twin: str | None = None) -> float:
     """A simulation: its steps at :func:`step_ms` (the whole loop: an AO case replaying its LGS
     chain's slopes takes less), :data:`BUDGET_SHARE` more with the residual budget, and the
     iterative tomography's solves (:func:`iterative_seconds`)."""
     budget = BUDGET_SHARE if case.get("ao", {}).get("residual_budget", False) else 0.0
-    return FrameClock.from_config(case).n_steps * (1 + budget) * step_ms(case) / 1e3 + iterative_seconds(case)
+    steps_s = FrameClock.from_config(case).n_steps * (1 + budget) * step_ms(case) / 1e3
+    return steps_s + iterative_seconds(case, lgs_twin)
 
 
-def simulate_minutes(case: dict) -> int:
+def simulate_minutes(case: dict, lgs_twin: str | None = None) -> int:
     """A simulation's wall time to declare [min]: at least the 60 measured at paper fidelity
     on 4.2 m, else :data:`RUNTIME_MARGIN` x :func:`simulate_seconds`."""
-    return max(60, math.ceil(RUNTIME_MARGIN * simulate_seconds(case) / 60))
+    return max(60, math.ceil(RUNTIME_MARGIN * simulate_seconds(case, lgs_twin) / 60))
 
 
 def lucky_seconds(settings: dict) -> float:
@@ -446,7 +554,10 @@ def study_jobs(view: ResolvedStudy) -> list[Job]:
             screens_seconds(screens.spec),
         )
         if (product := resolved.calibration) is not None:
-            add(f"calibration {product.key}", name, CALIBRATION_BYTES, None, 0.0, CALIBRATION_S)
+            spec = product.spec
+            add(
+                f"calibration {product.key}", name, calibration_memory_bytes(spec), None, 0.0, calibration_seconds(spec)
+            )
         if (product := resolved.reconstructor) is not None:
             add(
                 f"reconstructor {product.key}",
@@ -478,7 +589,8 @@ def study_jobs(view: ResolvedStudy) -> list[Job]:
             output, size = f"results/cases/{name}/telemetry.nc", telemetry_bytes(case)
         else:
             output, size = f"results/cases/{name}/frames.nc", frames_bytes(case)
-        add(f"simulate {name}", name, simulate_memory_bytes(case), output, size, simulate_seconds(case))
+        twin = resolved.lgs_twin
+        add(f"simulate {name}", name, simulate_memory_bytes(case, twin), output, size, simulate_seconds(case, twin))
         settings = resolved.lucky_settings
         add(f"lucky {name}", name, lucky_memory_bytes(settings), None, 0.0, lucky_seconds(settings))
     return list(jobs.values())
@@ -508,10 +620,17 @@ def preflight(view: ResolvedStudy, folder=".", memory_bytes: float | None = None
     for job, case, memory, output, size, _ in study_jobs(view):
         if memory > memory_bytes:
             key = "turbulence" if job.startswith("turbulence ") else f"cases.{case}"  # screens: of every case
+            dense = job.split()[0] in ("reconstructor", "commands")
             problems.append(
                 f"config key '{key}': job {job} needs about {_gb(memory)} of memory, more than "
                 f"the {_gb(memory_bytes)} available (this machine's memory, or --resources mem_mb=N if "
                 "larger)"
+                + (
+                    "; tomography.method: iterative builds no dense reconstructor or command matrix "
+                    "(docs: methods/layer-tomography)"
+                    if dense
+                    else ""
+                )
             )
         if output is not None and not (Path(folder) / output).exists():
             pending.append((job, case, output, size))

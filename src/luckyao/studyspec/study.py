@@ -100,6 +100,12 @@ def _check_case(name: str, case: dict, turbulence: dict) -> None:
                 f"config key '{where}.targets_arcsec': target ({x}, {y}) lies beyond "
                 f"turbulence.field_radius_arcsec = {radius}"
             )
+    lgs = case["lgs"]
+    if lgs["enabled"] and lgs["asterism_diameter_arcsec"] / 2 > radius:
+        raise ConfigError(
+            f"config key '{where}.lgs.asterism_diameter_arcsec': beacons {lgs['asterism_diameter_arcsec'] / 2:g}\" "
+            f"off axis lie beyond turbulence.field_radius_arcsec = {radius} (the screens' field)"
+        )
 
 
 def _check_iterative(where: str, case: dict) -> None:

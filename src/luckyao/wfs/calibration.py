@@ -35,6 +35,7 @@ from ..atmosphere.screens import periodic_screen_amplitude, periodic_screen_pair
 from ..atmosphere.statistics import r0_at_wavelength, von_karman_psd, von_karman_structure_function
 from ..geometry import footprint_scale
 from ..units import REFERENCE_WAVELENGTH_M
+from .sampling import calibration_screen_size
 from .shack_hartmann import ShackHartmann, exposure_images, intensity_samples, intensity_spectra, uplink_otf
 
 DITHER_PIXELS = 0.05
@@ -129,7 +130,7 @@ def measure_response(
         raise ValueError("1 to 4 beacons per draw")
     dither = DITHER_PIXELS * wfs.pixel_scale_rad if dither_rad is None else dither_rad
     n, n_launch = wfs.grid.n_pix, wfs.launch_grid.n_pix
-    size = 1 << int(np.ceil(np.log2(4 * n)))  # screens 4x the pupil: the sub-aperture scales in full
+    size = calibration_screen_size(n)
     amplitude = periodic_screen_amplitude(seeing.psd, size, wfs.grid.dx_m)
     corners = [((k // 2) * size // 2, (k % 2) * size // 2) for k in range(n_beacons)]
     x, y = wfs.grid.xy_m

@@ -37,6 +37,7 @@ from ..optics.pupil import PupilGrid, Telescope
 from ..units import ARCSEC_RAD
 from .beacons import LgsConfig, altitude_limits_m, altitude_profile, elongation_offsets_rad
 from .kernels import exposure_kernel, lane_otf, uplink_kernel
+from .sampling import samples_per_subaperture
 
 
 @dataclass(frozen=True, eq=False)
@@ -69,9 +70,8 @@ class ShackHartmann:
 
     @cached_property
     def samples_per_subaperture(self) -> int:
-        """``n_s``: even number of pupil samples per sub-aperture side."""
-        ideal = self.subaperture_m * self.n_pixels * self.pixel_scale_rad / self.wavelength_m
-        return max(2, 2 * int(round(ideal / 2)))
+        """``n_s``: even number of pupil samples per sub-aperture side (:func:`.sampling.samples_per_subaperture`)."""
+        return samples_per_subaperture(self.subaperture_m, self.n_pixels, self.pixel_scale_rad, self.wavelength_m)
 
     @cached_property
     def grid(self) -> PupilGrid:
