@@ -312,9 +312,12 @@ def screens_priority(key):
 
 def screens_threads(key):
     """A screens job's threads: two layers at once (``TURBULENCE_THREADS``) when it is the study's
-    only screens job; one when there are several, so that they run side by side and none waits
-    for both cores while one-core jobs hold one (the same screens for any number)."""
-    return TURBULENCE_THREADS if len(TURBULENCE_BY_KEY) == 1 else 1
+    only screens job and two layers fit this machine's memory; else one, so that several run side
+    by side and none waits for both cores while one-core jobs hold one (the same screens for any
+    number)."""
+    spec = TURBULENCE_BY_KEY[key]
+    fits = mem_mb(turbulence_memory_bytes(spec, TURBULENCE_THREADS)) * 1e6 <= machine_memory_bytes()
+    return TURBULENCE_THREADS if len(TURBULENCE_BY_KEY) == 1 and fits else 1
 
 
 def slopes_priority(key):
