@@ -58,7 +58,8 @@ SIMULATE_BYTES = 2.5e9
 MARGIN = 1.3
 """Declared memory over the estimate."""
 TURBULENCE_THREADS = 2
-"""Layers the turbulence rule makes at once (its ``threads``)."""
+"""Layers a screens job makes at once when it is its study's only one and two fit the machine's
+memory (the turbulence rule's ``threads``: else one)."""
 FRAME_BLOCK = 64
 """Frames a simulation or post-processing holds at once."""
 
