@@ -47,7 +47,7 @@ def test_the_overlay_derives_the_stated_system(elt):
         assert case["camera"]["n_pixels"] == 960
         # 2 px per lambda/D over the field: 2 x 39 m x 2" / 800 nm = 945.4, rounded up to 8 x 2^4 x 3 x 5 / 2
         assert 2 * 39.0 * 2.0 * ARCSEC_RAD / 8e-7 == pytest.approx(945.4, abs=0.1)
-        assert case["tomography"]["method"] == "iterative"
+        assert case["tomography"]["method"] == "iterative" and case["wfs"]["model"] == "geometric"
         assert case["lgs"]["n_beacons"] == 6 and case["lgs"]["height_m"] == 90e3
         assert case["duration_s"] == 20.0 and case["atmosphere"]["r0_500nm_m"] == 0.135
         assert len(case["atmosphere"]["height_m"]) == 9
@@ -109,13 +109,15 @@ def test_every_39m_job_is_declared_within_16_gb(elt):
     view = checked_study(config, memory_bytes=64e9)  # the machine aside: the estimates themselves
     jobs = [job for job in study_jobs(view) if job.case in CASES]
     names = {job.name.split()[0] for job in jobs}
-    assert {"turbulence", "calibration", "slopes", "simulate", "lucky"} <= names
-    assert not names & {"reconstructor", "commands"}
+    assert {"turbulence", "slopes", "simulate", "lucky"} <= names
+    assert not names & {"reconstructor", "commands", "calibration"}  # the geometric WFS: no calibration
     for job in jobs:
         margin = 1.0 if job.name.startswith(("lucky", "calibration")) else MARGIN
         assert margin * job.memory_bytes <= JOB_LIMIT_BYTES, job
         assert job.seconds > 0
     assert view.cases["noao_D39m"].lgs_twin == "ltao_sodium_D39m"
+    slopes = next(job for job in jobs if job.name.startswith("slopes "))
+    assert slopes.seconds < 120 and MARGIN * slopes.memory_bytes < 5e9  # geometric: ~3 ms per step
     simulate = {job.case: job for job in jobs if job.name.startswith("simulate ")}
     assert simulate["noao_D39m"].memory_bytes < simulate["ltao_sodium_D39m"].memory_bytes
     assert simulate["noao_D39m"].seconds < simulate["ltao_sodium_D39m"].seconds
@@ -130,7 +132,9 @@ def test_the_calibration_draws_are_capped_at_39m(elt):
     assert calibration_screen_size(2048) == 8192
     assert calibration_screen_size(74 * 52) == 8192
     view = resolve_study(config, validate_study(config))
-    spec = view.cases["ltao_sodium_D39m"].calibration.spec
+    assert view.cases["ltao_sodium_D39m"].calibration is None  # the overlay's geometric WFS
+    physical = deep_merge(config, {"cases": {"ltao_sodium_D39m": {"wfs": {"model": "physical"}}}})
+    spec = resolve_study(physical, validate_study(physical)).cases["ltao_sodium_D39m"].calibration.spec
     assert 4e9 < calibration_memory_bytes(spec) < 10e9
     default = view.cases["ltao_r0_13.5cm"].calibration.spec
     assert calibration_memory_bytes(default) == 1.5e9  # what small sensors declared before

@@ -42,7 +42,7 @@ from typing import NamedTuple
 from ..clock import FrameClock, frame_count
 from ..steps.screens import TurbulenceSpec, strip_specs
 from ..studyspec.lucky import registrations
-from ..studyspec.products import commands_spec, iterative, reconstructor_spec
+from ..studyspec.products import commands_spec, geometric_wfs, iterative, reconstructor_spec
 from ..studyspec.resolved import criteria_of, imaged_targets
 from ..studyspec.schema import ConfigError, case_defaults
 from ..studyspec.study import validate_study
@@ -123,7 +123,11 @@ def slopes_bytes(case: dict) -> float:
 def sensor_bytes(case: dict) -> float:
     """The LGS sensor's own arrays: its exposure's downlink phases (float32, every beacon's pupil grid
     and step) and, while its elongation OTF is built, four complex128 arrays of every valid
-    sub-aperture's OTF samples (``M (M/2 + 1)``: 1.4 GB at 39 m with the 12" field)."""
+    sub-aperture's OTF samples (``M (M/2 + 1)``: 1.4 GB at 39 m with the 12" field); the geometric
+    sensor's, its downlink phases on the nodes and their float64 mean (a few MB at 39 m)."""
+    if geometric_wfs(case):
+        nodes = (2 * case["wfs"]["n_subapertures"] + 1) ** 2
+        return (4.0 * case["wfs"]["exposure_steps"] + 8.0 * 4) * case["lgs"]["n_beacons"] * nodes
     n = wfs_pupil_samples(case)
     m = 2 * n // case["wfs"]["n_subapertures"]
     downlink = 4.0 * case["wfs"]["exposure_steps"] * case["lgs"]["n_beacons"] * n * n
@@ -333,6 +337,13 @@ WFS_SUBAPERTURE_NS, WFS_SAMPLES_EXPONENT, MEASURED_WFS_SAMPLES = 1406.0, 4.6, 16
 samples across a sub-aperture (the default AO case's 0.27 ms per step for 4 x 48), and its power of
 those samples: 0.19, 3.0, 13.0 and 79 ms per step measured at 4.2 m for 6 sodium beacons x 48
 sub-apertures with 14, 26, 34 and 52 samples (WFS fields of 3.36, 6, 8 and 12"; a loaded machine)."""
+GEOMETRIC_NODES = 4.1
+"""The geometric sensor's pupil samples per valid sub-aperture: the nodes at half its pitch
+(corners, edge mid-points, centre; 16,264 for the 39 m case's 3,972 sub-apertures)."""
+GEOMETRIC_WFS_NS = 80.0
+"""The geometric sensor's time per beacon, valid sub-aperture and step besides the propagation:
+the exposure's mean phase, the mean gradients, the NEA noise and the tilt removal (3.7 ms of CPU
+per two-step exposure of 6 x 3,972 sub-apertures measured at 39 m, a loaded machine)."""
 CALIBRATION_SCREEN_NS = 70.0
 """A calibration draw's time per screen sample (normal deviates, product, complex FFT): 0.29 s per
 2048^2 draw measured (4.2 m, the 12" WFS field; a loaded machine)."""
@@ -395,7 +406,12 @@ def wfs_step_ns(case: dict) -> float:
 
 def lgs_chain_ms(case: dict) -> float:
     """One core's ms per step of the LGS chain: every beacon's propagation to its valid
-    sub-apertures' pupil samples (:data:`LGS_PROPAGATION_NS`) and its WFS (:func:`wfs_step_ns`)."""
+    sub-apertures' pupil samples (:data:`LGS_PROPAGATION_NS`) and its WFS (:func:`wfs_step_ns`);
+    geometric (``wfs.model``), to :data:`GEOMETRIC_NODES` nodes per sub-aperture and
+    :data:`GEOMETRIC_WFS_NS`."""
+    if geometric_wfs(case):
+        per_subaperture_ns = LGS_PROPAGATION_NS * GEOMETRIC_NODES + GEOMETRIC_WFS_NS
+        return case["lgs"]["n_beacons"] * valid_subapertures(case) * per_subaperture_ns / 1e6
     n_s = wfs_pupil_samples(case) / case["wfs"]["n_subapertures"]
     per_subaperture_ns = LGS_PROPAGATION_NS * n_s**2 + wfs_step_ns(case)
     return case["lgs"]["n_beacons"] * valid_subapertures(case) * per_subaperture_ns / 1e6
@@ -410,8 +426,9 @@ def elongation_otf_seconds(spec: dict) -> float:
 
 def slopes_seconds(case: dict) -> float:
     """An LGS slopes product: the sensor's set-up (:func:`elongation_otf_seconds`) and the LGS chain
-    (:func:`lgs_chain_ms`) at every step."""
-    return elongation_otf_seconds(case) + FrameClock.from_config(case).n_steps * lgs_chain_ms(case) / 1e3
+    (:func:`lgs_chain_ms`) at every step (the geometric sensor has no elongation OTF)."""
+    setup = 0.0 if geometric_wfs(case) else elongation_otf_seconds(case)
+    return setup + FrameClock.from_config(case).n_steps * lgs_chain_ms(case) / 1e3
 
 
 def slopes_minutes(case: dict) -> int:

@@ -5,7 +5,7 @@ the prior (:class:`luckyao.tomography.prior.TurbulencePrior`), the WFS
 import numpy as np
 
 from .grids import LayerGrids
-from .noise import SlopeNoise
+from .noise import SlopeNoise, SubapertureNoise
 from .operators import MeasurementOperator
 from .preconditioner import FourierPreconditioner
 from .prior import BiharmonicPrior
@@ -32,6 +32,7 @@ def build_tomography(
     preconditioned: bool = True,
     samples_per_subaperture: int = 2,
     dtype=np.float32,
+    noise_covariance_rad2: np.ndarray | None = None,
 ) -> LayerTomography:
     """:class:`.solver.LayerTomography` (PCG to ``rtol`` from a cold start, to ``warm_rtol`` from
     the previous exposure's solution) on grids covering every beacon and target (directions
@@ -39,7 +40,9 @@ def build_tomography(
     (default the WFS's Nyquist frequency ``1 / (2 d)``); ``samples_per_subaperture`` pupil samples
     across a sub-aperture (2: layers at half the sub-aperture pitch, cone-scaled; 1: Fried geometry at the
     sub-aperture pitch, 40-60 % more DM-fitted residual than the dense path on the study's systems);
-    the solve in ``dtype`` (float32: half the memory traffic of float64, the same estimate to 1e-4)."""
+    the solve in ``dtype`` (float32: half the memory traffic of float64, the same estimate to 1e-4);
+    the slopes weighed by ``noise_covariance_rad2`` (n_valid, 2, 2) [rad^2] when given (a noisy
+    geometric WFS's NEA), else by ``noise_rms_rad``."""
     d = wfs.subaperture_m
     grids = LayerGrids.covering(
         prior.heights_m,
@@ -52,7 +55,10 @@ def build_tomography(
     operator = MeasurementOperator.build(grids, wfs.valid, d, beacon_directions_rad)
     match = 1 / (2 * d) if match_frequency_per_m is None else match_frequency_per_m
     biharmonic = BiharmonicPrior(prior, grids, match, dtype)
-    noise = SlopeNoise.uniform(noise_rms_rad)
+    if noise_covariance_rad2 is None:
+        noise = SlopeNoise.uniform(noise_rms_rad)
+    else:
+        noise = SubapertureNoise(np.asarray(noise_covariance_rad2, dtype=float))
     preconditioner = (
         FourierPreconditioner.build(operator, biharmonic, noise.mean_inverse_rad2, dtype) if preconditioned else None
     )

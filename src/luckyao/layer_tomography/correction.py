@@ -38,9 +38,9 @@ class LayerEstimator:
     @classmethod
     def for_case(cls, case, **options) -> "LayerEstimator":
         """The estimator of a :class:`luckyao.studyspec.case.Case` with LGS: its prior, WFS, beacons,
-        slope noise and ``tomography.iterative_rtol`` (a warm-started solve's tolerance), on grids
-        covering its targets and correction direction; with AO, its DM and correction mode. ``options`` go to
-        :func:`.assembly.build_tomography`."""
+        slope noise (its NEA with a noisy geometric WFS) and ``tomography.iterative_rtol`` (a
+        warm-started solve's tolerance), on grids covering its targets and correction direction;
+        with AO, its DM and correction mode. ``options`` go to :func:`.assembly.build_tomography`."""
         targets = [(t.theta_x_rad, t.theta_y_rad) for t in case.targets]
         ao = case.ao if case.ao is not None and case.ao.enabled else None
         wfs = case.shack_hartmann()
@@ -50,6 +50,7 @@ class LayerEstimator:
             case.lgs.directions_rad,
             case.lgs.height_m,
             case.tomography.noise_rms_rad,
+            noise_covariance_rad2=case.slope_noise_covariance_rad2(wfs),
             target_directions_rad=targets + ([ao.correction_direction_rad] if ao else []),
             **{"warm_rtol": case.tomography.iterative_rtol, **options},
         )

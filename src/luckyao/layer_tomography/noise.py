@@ -1,4 +1,5 @@
-"""The slope-noise covariance of the layer-space tomography: diagonal, ``N = diag(sigma_i^2)``."""
+"""The slope-noise covariance of the layer-space tomography: diagonal, ``N = diag(sigma_i^2)``, or
+each sub-aperture's 2 x 2 block (a geometric WFS's NEA)."""
 
 from dataclasses import dataclass
 
@@ -27,3 +28,28 @@ class SlopeNoise:
     def mean_inverse_rad2(self) -> float:
         """Mean of ``1 / sigma_i^2`` (the preconditioner's uniform weight)."""
         return float(np.mean(1.0 / np.asarray(self.variance_rad2)))
+
+
+@dataclass(frozen=True, eq=False)
+class SubapertureNoise:
+    """Slope-noise covariance of each sub-aperture's x and y slopes, ``(n_valid, 2, 2)`` [rad^2],
+    every beacon's the same (a geometric WFS's NEA: ``studyspec.case.slope_noise_covariance_rad2``):
+    ``N`` block diagonal."""
+
+    covariance_rad2: np.ndarray
+
+    def __post_init__(self):
+        try:
+            np.linalg.cholesky(self.covariance_rad2)
+        except np.linalg.LinAlgError:
+            raise ValueError("each sub-aperture's slope-noise covariance must be positive definite") from None
+        object.__setattr__(self, "_inverse", np.linalg.inv(self.covariance_rad2))
+
+    def weigh(self, slopes: np.ndarray) -> np.ndarray:
+        """``N^-1 s`` of slopes ``(n_beacons, 2, n_valid)``, in their dtype."""
+        return np.einsum("vab,...bv->...av", self._inverse.astype(slopes.dtype), slopes)
+
+    @property
+    def mean_inverse_rad2(self) -> float:
+        """Mean of the diagonal of ``N^-1`` (the preconditioner's uniform weight)."""
+        return float(np.mean(np.diagonal(self._inverse, axis1=1, axis2=2)))

@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import kernels
-from .noise import SlopeNoise
+from .noise import SlopeNoise, SubapertureNoise
 from .operators import MeasurementOperator
 from .preconditioner import FourierPreconditioner
 from .prior import BiharmonicPrior
@@ -64,7 +64,7 @@ class LayerTomography:
 
     operator: MeasurementOperator
     prior: BiharmonicPrior
-    noise: SlopeNoise
+    noise: SlopeNoise | SubapertureNoise
     preconditioner: FourierPreconditioner | None
     rtol: float = 3e-4
     max_iterations: int = 200

@@ -18,16 +18,29 @@ from ..io.datasets import open_dataset, require_finite
 from ..progress import Progress
 from ..studyspec.case import Case
 from ..studyspec.products import lgs_chain_config
+from ..wfs.geometric import GeometricLgsSensor
 from ..wfs.sensor import LgsSensor
 from .calibration import slope_estimator
 
 SLOPE_DIMS = ("exposure", "beacon", "axis", "subaperture")
 
 
-def lgs_sensor(case: Case, screens: ScreenSet, seed: int, calibration=None) -> LgsSensor:
-    """The case's LGS sensor, its slopes calibrated by ``calibration``
-    (:func:`.calibration.build_calibration`) when the case asks for it."""
+def lgs_sensor(case: Case, screens: ScreenSet, seed: int, calibration=None) -> LgsSensor | GeometricLgsSensor:
+    """The case's LGS sensor: physical optics, its slopes calibrated by ``calibration``
+    (:func:`.calibration.build_calibration`) when the case asks for it, or geometric
+    (``wfs.model``), its noise the case's NEA (``Case.slope_noise_covariance_rad2``)."""
     wfs = case.wfs
+    if wfs.geometric:
+        shack_hartmann = case.shack_hartmann()
+        return GeometricLgsSensor(
+            case.lgs,
+            shack_hartmann,
+            wfs.exposure_steps,
+            list(case.layers),
+            screens,
+            seed,
+            case.slope_noise_covariance_rad2(shack_hartmann),
+        )
     sensor = LgsSensor(
         case.lgs,
         case.shack_hartmann(),

@@ -16,24 +16,43 @@ import numpy as np
 import xarray as xr
 
 from ..ao.control import command_matrix, dm_slopes_matrix
-from ..studyspec.case import ao_from, lgs_from, targets_from, telescope_from, tomography_from, wfs_from
+from ..studyspec.case import (
+    ao_from,
+    lgs_from,
+    seeing_from,
+    slope_noise_covariance_rad2,
+    targets_from,
+    telescope_from,
+    tomography_from,
+    wfs_from,
+)
 from ..tomography.reconstructor import factorize, reconstruction_points, target_reconstructor
 from ..tomography.slopes import SlopeGeometry, slope_covariance
 
 log = logging.getLogger(__name__)
 
 
+def noise_covariance_rad2(spec: dict, settings, wfs, lgs) -> np.ndarray | None:
+    """The slopes' NEA (``studyspec.case.slope_noise_covariance_rad2``) of a reconstructor or
+    command-matrix spec that has the seeing of its spots (``studyspec.products.noise_seeing``), or None."""
+    if "atmosphere" not in spec:
+        return None
+    return slope_noise_covariance_rad2(settings, wfs, lgs, seeing_from(spec["atmosphere"], lgs))
+
+
 def build_reconstructors(spec: dict) -> xr.Dataset:
     """Reconstructors for every target of a ``studyspec.products.reconstructor_spec``."""
     telescope = telescope_from(spec["telescope"])
     lgs = lgs_from(spec["lgs"])
-    wfs = wfs_from(spec["wfs"]).shack_hartmann(telescope, lgs)
+    settings = wfs_from(spec["wfs"])
+    wfs = settings.shack_hartmann(telescope, lgs)
     tomography = tomography_from(spec["tomography"])
     prior, noise_rad = tomography.prior, tomography.noise_rms_rad
     geometry = SlopeGeometry.from_wfs(wfs, lgs)
     points = reconstruction_points(telescope, wfs.subaperture_m, tomography.points_per_subaperture)
     start = time.perf_counter()
-    cholesky = factorize(slope_covariance(prior, geometry, noise_rad))
+    noise = noise_covariance_rad2(spec, settings, wfs, lgs)
+    cholesky = factorize(slope_covariance(prior, geometry, noise_rad, noise_covariance_rad2=noise))
     log.info("%d slopes: covariance factorised in %.1f s", geometry.n_slopes, time.perf_counter() - start)
     matrices = []
     for target in targets_from(spec["targets_arcsec"]):
@@ -58,12 +77,14 @@ def build_commands(spec: dict) -> xr.Dataset:
     """The command matrix and the DM slopes of a ``studyspec.products.commands_spec``."""
     telescope = telescope_from(spec["telescope"])
     lgs = lgs_from(spec["lgs"])
-    wfs = wfs_from(spec["wfs"]).shack_hartmann(telescope, lgs)
+    settings = wfs_from(spec["wfs"])
+    wfs = settings.shack_hartmann(telescope, lgs)
     tomography = tomography_from(spec["tomography"])
     ao = ao_from(spec["ao"])
     dm = ao.deformable_mirror(telescope)
     geometry = SlopeGeometry.from_wfs(wfs, lgs)
     start = time.perf_counter()
+    noise = noise_covariance_rad2(spec, settings, wfs, lgs)
     matrix = command_matrix(
         tomography.prior,
         geometry,
@@ -72,6 +93,9 @@ def build_commands(spec: dict) -> xr.Dataset:
         ao.mode,
         ao.correction_direction_rad,
         ao.glao_max_height_m,
+        cholesky_lower=None
+        if noise is None
+        else factorize(slope_covariance(tomography.prior, geometry, 0.0, noise_covariance_rad2=noise)),
     )
     log.info(
         "%s: %d actuators x %d slopes in %.1f s", ao.mode, dm.n_valid, geometry.n_slopes, time.perf_counter() - start

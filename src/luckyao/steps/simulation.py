@@ -59,7 +59,8 @@ def laser_criteria_of(case: Case, reconstructors: np.ndarray) -> LaserCriteria:
     prior, noise_rad = tomography.prior, tomography.noise_rms_rad
     geometry = SlopeGeometry.from_wfs(wfs, case.lgs)
     points = reconstruction_points(case.telescope, wfs.subaperture_m, tomography.points_per_subaperture)
-    cholesky = factorize(slope_covariance(prior, geometry, noise_rad))
+    noise = case.slope_noise_covariance_rad2(wfs)
+    cholesky = factorize(slope_covariance(prior, geometry, noise_rad, noise_covariance_rad2=noise))
     ground = ground_layers(prior, case.ao.glao_max_height_m)
     altitude = [i for i in range(len(prior.heights_m)) if i not in ground]
     layers = [

@@ -23,13 +23,15 @@ from ..tomography.prior import TurbulencePrior
 from ..units import ARCSEC_RAD
 from ..wfs.beacons import LgsConfig
 from ..wfs.calibration import BeaconSeeing
+from ..wfs.geometric import noise_equivalent_angle_rad2
 from ..wfs.shack_hartmann import ShackHartmann
 from .schema import case_defaults
 
 
 @dataclass(frozen=True)
 class WfsSettings:
-    """One LGS Shack-Hartmann per beacon: its geometry, exposure, detector noise and slope
+    """One LGS Shack-Hartmann per beacon: its geometry, exposure, detector noise, ``model``
+    (``physical`` optics, or ``geometric``: :mod:`luckyao.wfs.geometric`) and, physical, its slope
     estimator (``centroider``, its ``threshold`` for ``tcog``, and ``calibration``: none,
     or ``dither`` for the calibrated response from ``calibration_draws`` turbulence draws,
     :mod:`luckyao.wfs.calibration`)."""
@@ -45,6 +47,11 @@ class WfsSettings:
     threshold: float
     calibration: str
     calibration_draws: int
+    model: str
+
+    @property
+    def geometric(self) -> bool:
+        return self.model == "geometric"
 
     def shack_hartmann(self, telescope: Telescope, lgs: LgsConfig) -> ShackHartmann:
         """The sensor of these settings at the beacons' wavelength."""
@@ -137,6 +144,18 @@ def lgs_from(block: dict) -> LgsConfig:
 def wfs_from(block: dict) -> WfsSettings:
     """The settings of a ``wfs`` block, its optional keys by default the schema's."""
     return WfsSettings(**{**case_defaults("wfs"), **block})
+
+
+def slope_noise_covariance_rad2(
+    settings: WfsSettings, wfs: ShackHartmann, lgs: LgsConfig, seeing: BeaconSeeing
+) -> np.ndarray | None:
+    """The LGS slopes' noise covariance (n_valid, 2, 2) [rad^2] that a geometric sensor with
+    photon noise draws from and the tomography weighs its slopes by: each sub-aperture's NEA
+    (:func:`luckyao.wfs.geometric.noise_equivalent_angle_rad2`); None otherwise (the tomography's
+    ``noise_rms_arcsec``)."""
+    if not settings.geometric or settings.photons_per_subaperture is None:
+        return None
+    return noise_equivalent_angle_rad2(wfs, lgs, seeing, settings.photons_per_subaperture, settings.read_noise_e)
 
 
 def seeing_from(atmosphere: dict, lgs: LgsConfig) -> BeaconSeeing:
@@ -258,3 +277,8 @@ class Case:
     def shack_hartmann(self) -> ShackHartmann:
         """The LGS WFS (the case must have LGS)."""
         return self.wfs.shack_hartmann(self.telescope, self.lgs)
+
+    def slope_noise_covariance_rad2(self, wfs: ShackHartmann | None = None) -> np.ndarray | None:
+        """The case's :func:`slope_noise_covariance_rad2` (of ``wfs``, by default :meth:`shack_hartmann`'s)."""
+        wfs = self.shack_hartmann() if wfs is None else wfs
+        return slope_noise_covariance_rad2(self.wfs, wfs, self.lgs, self.seeing)

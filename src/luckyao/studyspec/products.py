@@ -54,16 +54,38 @@ def iterative(case: dict) -> bool:
     return case["tomography"].get("method") == "iterative"
 
 
+def geometric_wfs(case: dict) -> bool:
+    """Whether a resolved case's LGS WFS is the geometric one (``wfs.model``): no calibration product."""
+    return case["wfs"].get("model") == "geometric"
+
+
 ITERATIVE_KEYS = frozenset(("method", "iterative_rtol"))
 """The tomography's keys that choose and tune its method (absent at their defaults: ``scaling.derived_case``)."""
 
 
+SEEING_KEYS = ("r0_500nm_m", "outer_scale_m", "height_m", "cn2_fraction")
+"""The atmosphere's keys of the seeing the beacons' spots see (the mean r0)."""
+
+
+def seeing_spec(case: dict) -> dict:
+    """The atmosphere block of the seeing the beacons' spots see (``case.seeing_from``)."""
+    return {key: case["atmosphere"][key] for key in SEEING_KEYS}
+
+
+def noise_seeing(case: dict) -> dict:
+    """``{"atmosphere": seeing_spec}`` when the tomography weighs the slopes by the spots' NEA (a
+    geometric WFS with photon noise: ``case.slope_noise_covariance_rad2``), else ``{}``."""
+    if not geometric_wfs(case) or case["wfs"]["photons_per_subaperture"] is None:
+        return {}
+    return {"atmosphere": seeing_spec(case)}
+
+
 def reconstructor_spec(case: dict) -> dict | None:
     """Everything a case's tomographic reconstructor depends on (None without LGS, or with the
-    iterative tomography)."""
+    iterative tomography): with the slopes' NEA, the seeing of their spots too."""
     if not case["lgs"]["enabled"] or iterative(case):
         return None
-    return {key: case[key] for key in ("telescope", "lgs", "wfs", "tomography", "targets_arcsec")}
+    return {key: case[key] for key in ("telescope", "lgs", "wfs", "tomography", "targets_arcsec")} | noise_seeing(case)
 
 
 def reconstructor_key(spec: dict) -> str:
@@ -72,12 +94,13 @@ def reconstructor_key(spec: dict) -> str:
 
 def commands_spec(case: dict) -> dict | None:
     """Everything a case's AO command matrix depends on (None without AO, or with the iterative
-    tomography): not the targets or the atmosphere, so cases that differ only there share it."""
+    tomography): not the targets or the atmosphere (but the seeing with the slopes' NEA:
+    :func:`noise_seeing`), so cases that differ only there share it."""
     if case["ao"]["mode"] == "none" or iterative(case):
         return None
     not_in_commands = ("apodisation", "residual_budget", "laser_criteria", "learned_training_seed")
     ao = {key: value for key, value in case["ao"].items() if key not in not_in_commands}
-    return {**{key: case[key] for key in ("telescope", "lgs", "wfs", "tomography")}, "ao": ao}
+    return {**{key: case[key] for key in ("telescope", "lgs", "wfs", "tomography")}, "ao": ao} | noise_seeing(case)
 
 
 def commands_key(spec: dict) -> str:
@@ -85,19 +108,24 @@ def commands_key(spec: dict) -> str:
 
 
 def calibration_spec(study: dict, case: dict) -> dict | None:
-    """Everything a case's WFS calibration depends on (None without LGS or calibration):
+    """Everything a case's WFS calibration depends on (None without LGS or calibration, or with the
+    geometric WFS: the calibrated response is the physical-optics sensor's):
     the sensor, its estimator and the seeing (the mean r0; not the winds, the noise or
     the exposure time, so cases that differ only there share it)."""
-    wfs = case["wfs"]
-    if not case["lgs"]["enabled"] or {**case_defaults("wfs"), **wfs}["calibration"] == "none":
+    if not case["lgs"]["enabled"] or geometric_wfs(case):
         return None
-    atm = case["atmosphere"]
+    if {**case_defaults("wfs"), **case["wfs"]}["calibration"] == "none":
+        return None
     return {
         "seed": study["seed"],
         "telescope": case["telescope"],
         "lgs": case["lgs"],
-        "wfs": {k: v for k, v in wfs.items() if k not in ("photons_per_subaperture", "read_noise_e", "exposure_steps")},
-        "atmosphere": {k: atm[k] for k in ("r0_500nm_m", "outer_scale_m", "height_m", "cn2_fraction")},
+        "wfs": {
+            k: v
+            for k, v in case["wfs"].items()
+            if k not in ("photons_per_subaperture", "read_noise_e", "exposure_steps")
+        },
+        "atmosphere": seeing_spec(case),
     }
 
 

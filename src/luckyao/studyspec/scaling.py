@@ -134,9 +134,10 @@ PRIOR_KEY = "tomography.prior_r0_500nm_m"
 
 def derived_case(case: dict, where: str) -> dict:
     """A merged case (schema-valid) resolved: :func:`derive_size_defaults`, the prior's r0
-    (:data:`PRIOR_KEY`) the case's mean r0 when left out, and ``tomography.method`` left out when
-    it is the default (``dense``), with the iterative method's keys: a case that spells the
-    default out keeps the config hash and product keys of one that does not."""
+    (:data:`PRIOR_KEY`) the case's mean r0 when left out, ``tomography.method`` left out when
+    it is the default (``dense``), with the iterative method's keys, and ``wfs.model`` when it is
+    the default (``physical``; a geometric case without :data:`PHYSICAL_WFS_KEYS`): a case that
+    spells a default out keeps the config hash and product keys of one that does not."""
     out = derive_size_defaults(case, where)
     tomography = out["tomography"]
     tomography.setdefault("prior_r0_500nm_m", out["atmosphere"]["r0_500nm_m"])
@@ -144,7 +145,23 @@ def derived_case(case: dict, where: str) -> dict:
         del tomography["method"]
     if "method" not in tomography:
         tomography.pop("iterative_rtol", None)
+    wfs = out["wfs"]
+    if wfs.get("model") == case_defaults("wfs")["model"]:
+        del wfs["model"]
+    if wfs.get("model") == "geometric":
+        if wfs.get("centroider", "cog") != "cog":
+            raise ConfigError(
+                f"config key '{where}.wfs.centroider': wfs.model geometric models the centre of gravity's "
+                f"noise (cog), not {wfs['centroider']}"
+            )
+        for key in PHYSICAL_WFS_KEYS:
+            wfs.pop(key, None)
     return out
+
+
+PHYSICAL_WFS_KEYS = ("centroider", "threshold", "calibration", "calibration_draws")
+"""The WFS keys of the physical-optics sensor only, left out of a geometric case's resolved config
+(:func:`derived_case`), so that their values name none of its products."""
 
 
 def seeded_case(case: dict, seed: int) -> dict:

@@ -83,6 +83,11 @@ def _check_case(name: str, case: dict, turbulence: dict) -> None:
         )
     if tomo.get("method") == "iterative":
         _check_iterative(where, case)
+    if case["wfs"].get("model") == "geometric" and case["ao"].get("residual_budget"):
+        raise ConfigError(
+            f"config key '{where}.ao.residual_budget': needs wfs.model physical (its sensor part is the "
+            "physical-optics sensor against the geometric mean gradient)"
+        )
     if case["telescope"]["obscuration_m"] >= case["telescope"]["diameter_m"]:
         raise ConfigError(f"config key '{where}.telescope.obscuration_m': must be below diameter_m")
     reference = case.get("reference_target")

@@ -92,9 +92,15 @@ def _remove_beacon_means(matrix: np.ndarray, geometry: SlopeGeometry, axis: int)
 
 
 def slope_covariance(
-    prior: TurbulencePrior, geometry: SlopeGeometry, noise_rms_rad: float, n_edge: int = 2
+    prior: TurbulencePrior,
+    geometry: SlopeGeometry,
+    noise_rms_rad: float,
+    n_edge: int = 2,
+    noise_covariance_rad2: np.ndarray | None = None,
 ) -> np.ndarray:
-    """``S = P G C_xx G^T P + sigma^2 I`` (n_slopes, n_slopes) float64 [rad^2].
+    """``S = P G C_xx G^T P + sigma^2 I`` (n_slopes, n_slopes) float64 [rad^2], or with
+    ``noise_covariance_rad2`` (n_valid, 2, 2) [rad^2] (each sub-aperture's x, y noise, every
+    beacon's the same: ``studyspec.case.slope_noise_covariance_rad2``) that in place of ``sigma^2 I``.
 
     For beacons b, b' and layer l the covariance of two sub-aperture slopes
     depends only on the lattice offset of the sub-apertures, so it is
@@ -139,7 +145,15 @@ def slope_covariance(
     cov = np.ascontiguousarray(cov)
     _remove_beacon_means(cov, geometry, 0)
     _remove_beacon_means(cov, geometry, 1)
-    cov[np.diag_indices_from(cov)] += noise_rms_rad**2
+    if noise_covariance_rad2 is None:
+        cov[np.diag_indices_from(cov)] += noise_rms_rad**2
+    else:
+        blocks = cov.reshape(n_b, 2, n_v, n_b, 2, n_v)
+        v = np.arange(n_v)
+        for b in range(n_b):
+            for a in range(2):
+                for c in range(2):
+                    blocks[b, a, v, b, c, v] += noise_covariance_rad2[:, a, c]
     return cov
 
 
