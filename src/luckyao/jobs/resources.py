@@ -272,8 +272,8 @@ def lucky_memory_bytes(settings: dict) -> float:
     partial sums (:func:`partial_sums_bytes`), replaying the frames (``replay_frames``) their block
     and the DM commands (:func:`replay_memory_bytes`: the screens are memory-mapped, pages of the
     file cache the kernel may drop and read again), Fourier lucky imaging's amplitudes
-    (:func:`fourier_memory_bytes`). The 16 m detector sweep: 10.2 GB (8.2 GB of its own measured
-    mid-run; 15.0 GB by the scaled estimate this replaced)."""
+    (:func:`fourier_memory_bytes`). The 16 m detector sweep: 10.2 GB, 9.93 GB of its own measured at
+    its peak (15.0 GB by the scaled estimate this replaced); the 8.2 m one 3.8 GB, 3.0 measured."""
     case = settings["case_config"]
     replay = replay_memory_bytes(case) if settings.get("replay_frames", False) else 0.0
     return LUCKY_BASE_BYTES + partial_sums_bytes(settings) + replay + fourier_memory_bytes(settings)
