@@ -288,10 +288,13 @@ def measure_products(
         np.save(Path(folder) / "command_matrix.npy", commands["command_matrix"].values)
         np.save(Path(folder) / "dm_slopes.npy", commands["dm_slopes"].values)
     spec = calibration_spec(study, deep_merge(config, {"wfs": {"calibration_draws": int(draws)}}))
-    start = time.perf_counter()
-    calibration = build_calibration(spec)
-    out.update(calibration_s=time.perf_counter() - start, calibration_draws=int(draws), products_peak_gb=peak_rss_gb())
-    calibration.to_netcdf(Path(folder) / "calibration.nc")
+    out.update(calibration_s=None, calibration_draws=0)
+    if spec is not None:  # none for a geometric WFS (wfs.model)
+        start = time.perf_counter()
+        calibration = build_calibration(spec)
+        out.update(calibration_s=time.perf_counter() - start, calibration_draws=int(draws))
+        calibration.to_netcdf(Path(folder) / "calibration.nc")
+    out["products_peak_gb"] = peak_rss_gb()
     return out
 
 
@@ -317,7 +320,7 @@ def measure_loop(
     products_ = (
         np.load(Path(folder) / "reconstructors.npy") if dense else None,
         (np.load(Path(folder) / "command_matrix.npy"), np.load(Path(folder) / "dm_slopes.npy")) if dense else None,
-        xr.load_dataset(Path(folder) / "calibration.nc"),
+        xr.load_dataset(Path(folder) / "calibration.nc") if (Path(folder) / "calibration.nc").exists() else None,
     )
     case = Case.from_config(config)
     wall, cpu = time.perf_counter(), time.process_time()
@@ -401,7 +404,7 @@ def main_sizes(
     print("|---|---|---|---|---|---|---|---|")
     for d, r in rows.items():
         print(
-            f"| {d:g} | {r['screens_s']:.1f} | {r['calibration_s']:.1f} ({r['calibration_draws']}) | "
+            f"| {d:g} | {r['screens_s']:.1f} | {_value(r['calibration_s'], '.1f')} ({r['calibration_draws']}) | "
             f"{_value(r['reconstructor_s'], '.1f')} | "
             f"{_value(r['commands_s'], '.1f')} | {r['products_peak_gb']:.2f} | {r['frames_gb']:.2f} "
             f"({r['frames_s']:g} s) | {r['screens_gb']:.2f} |"
