@@ -9,7 +9,7 @@ import pytest
 
 from luckyao.figures import FIGURE_KINDS, FigureSettings
 from luckyao.studyspec.study import load_study, validate_study
-from luckyao.studyspec.sweeps import expand_sweeps, sweep_points
+from luckyao.studyspec.sweeps import expand_study, sweep_points
 
 from synthetic import lucky_dataset
 
@@ -21,7 +21,7 @@ N_FRAMES, N_BLOCKS = 100, 5
 def figure():
     config, _ = load_study(CONFIG / "config.yaml", CONFIG / "apodisation.yaml")
     cases = validate_study(config)
-    spec = expand_sweeps(config)["figures"]["apodisation"]
+    spec = expand_study(config)["figures"]["apodisation"]
     points = [[p.case, p.values] for p in sweep_points(config, "apodisation")]
     settings = FigureSettings.from_dict(
         {**spec, "case_configs": {c: cases[c] for c in spec["cases"]}, "sweep_points": points}

@@ -8,6 +8,7 @@ import pytest
 
 from luckyao.figures import FIGURE_KINDS, FigureSettings
 from luckyao.studyspec.study import load_study, validate_study
+from luckyao.studyspec.sweeps import expand_study
 
 from synthetic import lucky_dataset
 
@@ -21,7 +22,7 @@ N_FRAMES, N_BLOCKS = 100, 5
 def figure():
     config, _ = load_study(*DIAMETER_FULL)
     cases = validate_study(config)
-    spec = config["figures"]["diameter"]
+    spec = expand_study(config)["figures"]["diameter"]  # its cases_matching filled in
     settings = FigureSettings.from_dict({**spec, "case_configs": {c: cases[c] for c in spec["cases"]}})
     rng = np.random.default_rng(1)
     frames = [rng.uniform(0, 0.3, N_FRAMES) for _ in spec["cases"]]

@@ -151,6 +151,29 @@ def test_the_overlay_moves_no_key_of_the_telescope_study():
         assert sha256(after.cases[name].lucky_settings) == sha256(case.lucky_settings), name
 
 
+def test_composed_over_the_telescope_study_the_diameter_figure_draws_39m():
+    """Issue 42's points on the `diameter` figure itself: its cases_matching takes the overlay's
+    cases, the six-beacon ring as its own series; alone, the telescope study's list is as it was."""
+    from luckyao.figures import FIGURE_KINDS, FigureSettings
+
+    from synthetic import lucky_dataset
+
+    diameter = (CONFIG / "config.yaml", CONFIG / "diameter.yaml")
+    alone = resolve_study(*(lambda c: (c, validate_study(c)))(load_study(*diameter)[0])).config
+    both = resolve_study(*(lambda c: (c, validate_study(c)))(load_study(*diameter, CONFIG / "elt.yaml")[0]))
+    drawn = both.config["figures"]["diameter"]["cases"]
+    assert [c for c in drawn if c not in CASES] == alone["figures"]["diameter"]["cases"]
+    assert set(drawn) - set(alone["figures"]["diameter"]["cases"]) == set(CASES)
+    spec = both.config["figures"]["diameter"]
+    settings = FigureSettings.from_dict({**spec, "case_configs": {c: both.configs[c] for c in drawn}})
+    frames = np.random.default_rng(2).uniform(0, 0.3, 100)
+    ds = FIGURE_KINDS["quality_vs_diameter"][0](settings, [lucky_dataset(0.2, 5, frame_strehl=frames)] * len(drawn))
+    assert list(ds.diameter.values) == [2.5, 4.2, 8.2, 16.0, 39.0]
+    assert ds.case.sel(series="LTAO, 6 LGS 90 km", diameter=39.0).item() == "ltao_sodium_D39m"
+    assert ds.case.sel(series="no AO", diameter=39.0).item() == "noao_D39m"
+    assert ds.case.sel(series="LTAO, LGS 90 km", diameter=39.0).item() == ""  # the ring is its own series
+
+
 def test_a_dense_39m_case_is_refused_naming_the_iterative_method():
     config = deep_merge(
         read_study(CONFIG / "config.yaml"),

@@ -9,7 +9,7 @@ import yaml
 from luckyao.studyspec.lucky import lucky_settings, sweep_detectors
 from luckyao.studyspec.schema import ConfigError
 from luckyao.studyspec.study import validate_study
-from luckyao.studyspec.sweeps import expand_sweeps
+from luckyao.studyspec.sweeps import expand_study
 
 TINY = Path(__file__).parent / "data" / "tiny.yaml"
 
@@ -58,7 +58,7 @@ def test_a_sweep_point_is_listed_by_its_case_name():
     study = yaml.safe_load(TINY.read_text())
     study["lucky"]["detector_sweep"]["cases"] = ["lgs", "r0_r0_500nm_m-0.15"]  # a point of the r0 sweep
     cases = validate_study(study)
-    detectors = lucky_settings(expand_sweeps(study), cases, "r0_r0_500nm_m-0.15")["detectors"]
+    detectors = lucky_settings(expand_study(study), cases, "r0_r0_500nm_m-0.15")["detectors"]
     assert set(sweep_detectors(study["lucky"])) <= set(detectors)
 
 

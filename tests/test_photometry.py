@@ -14,7 +14,7 @@ from luckyao.photometry import (
 )
 from luckyao.studyspec.schema import ConfigError
 from luckyao.studyspec.study import read_study, validate_study
-from luckyao.studyspec.sweeps import expand_sweeps
+from luckyao.studyspec.sweeps import expand_study
 from luckyao.studyspec.view import resolve_study
 
 
@@ -83,7 +83,7 @@ def test_the_scale_is_a_config_block_that_enters_no_case():
     assert config_with_defaults({"throughput": 0.4})["throughput"] == 0.4
     with pytest.raises(ValueError, match="unknown keys"):
         config_with_defaults({"zeropoint": 1.0})
-    study = expand_sweeps(read_study("config/config.yaml"))
+    study = expand_study(read_study("config/config.yaml"))
     other = dict(study, photometry={"band": "R", "wavelength_um": 0.65, "throughput": 0.3})
     views = [resolve_study(s, validate_study(s)) for s in (study, other)]
     for name, case in views[0].cases.items():

@@ -20,7 +20,7 @@ from luckyao.jobs.resources import preflight, study_jobs
 from luckyao.studyspec.lucky import sweep_detectors
 from luckyao.studyspec.schema import ConfigError
 from luckyao.studyspec.study import load_study, validate_study
-from luckyao.studyspec.sweeps import expand_sweeps
+from luckyao.studyspec.sweeps import expand_study
 from luckyao.studyspec.view import resolve_study
 
 from studies import REPO, TINY, snakemake, tiny, with_name, with_sweep
@@ -302,7 +302,7 @@ def free_disk(monkeypatch, free_bytes: float) -> None:
 def test_the_files_of_a_study_are_summed_against_the_free_disk(tmp_path, monkeypatch):
     """With keep_frames every frame cube stays: the sum must fit, not each file alone (the
     paper run with keep_frames, ~130 GB, was accepted with 40 GB free)."""
-    study = expand_sweeps(dict(tiny(), keep_frames=True))
+    study = expand_study(dict(tiny(), keep_frames=True))
     cases = validate_study(study)
     sizes = [job.output_bytes for job in study_jobs(resolve_study(study, cases)) if job.output is not None]
     free_disk(monkeypatch, max(sizes) * 1.01)
@@ -317,7 +317,7 @@ def test_the_files_of_a_study_are_summed_against_the_free_disk(tmp_path, monkeyp
 
 
 def test_frame_cubes_deleted_once_post_processed_count_as_many_as_run_at_once(tmp_path, monkeypatch):
-    study = expand_sweeps(tiny())
+    study = expand_study(tiny())
     cases = validate_study(study)
     jobs = [(job.name, job.output_bytes) for job in study_jobs(resolve_study(study, cases)) if job.output is not None]
     lasting = sum(size for job, size in jobs if not job.startswith("simulate "))
@@ -329,7 +329,7 @@ def test_frame_cubes_deleted_once_post_processed_count_as_many_as_run_at_once(tm
 
 
 def test_a_file_already_made_needs_no_disk(tmp_path, monkeypatch):
-    study = expand_sweeps(dict(tiny(), keep_frames=True))
+    study = expand_study(dict(tiny(), keep_frames=True))
     cases = validate_study(study)
     for output in (job.output for job in study_jobs(resolve_study(study, cases))):
         if output is not None:
@@ -379,7 +379,7 @@ def test_export_says_it_expected_a_cases_lucky_results(tmp_path, capsys):
 def test_without_frame_cubes_a_study_needs_only_its_telemetry_on_disk():
     """``replay_frames``: no simulation job writes a cube; its file is the telemetry, far
     smaller (the DM commands and a few values per frame)."""
-    cubes = expand_sweeps(tiny())
+    cubes = expand_study(tiny())
     replayed = dict(cubes, replay_frames=True)
     cases = validate_study(cubes)
     sizes = {
@@ -404,7 +404,7 @@ def test_replaying_frames_refuses_a_kept_cube_and_an_apodised_case_by_key(what):
         study["cases"]["ltao"]["ao"]["apodisation"] = {"driver": "lgs", "blocked_fraction": 0.1}
         key = "config key 'cases.ltao.ao.apodisation': an adaptively apodised case cannot be replayed"
     with pytest.raises(ConfigError, match=key):
-        validate_study(expand_sweeps(study))
+        validate_study(expand_study(study))
 
 
 def test_wall_times_grow_with_the_telescope_and_the_passes_of_a_replay():
@@ -415,8 +415,8 @@ def test_wall_times_grow_with_the_telescope_and_the_passes_of_a_replay():
     study = dict(tiny(), replay_frames=True)
     study["turbulence"].pop("duration_s")  # each case's screens as long as it needs
     study["cases"]["big"] = {"duration_s": 100.0, "telescope": {"diameter_m": 16.0, "obscuration_m": 4.571}}
-    cases = validate_study(expand_sweeps(study))
-    view = resolve_study(expand_sweeps(study), cases)
+    cases = validate_study(expand_study(study))
+    view = resolve_study(expand_study(study), cases)
     settings = view.cases["big"].lucky_settings
     assert simulate_minutes(cases["good"]) == 60 and simulate_minutes(cases["big"]) > 60
     noiseless = dict(settings, detectors={"noiseless": {"photons_per_frame": None, "read_noise_e": 0.0}})
@@ -426,7 +426,7 @@ def test_wall_times_grow_with_the_telescope_and_the_passes_of_a_replay():
 
 def _paper_view():
     paper, cases = load_study(REPO / "config" / "config.yaml", REPO / "config" / "paper.yaml")
-    return resolve_study(expand_sweeps(paper), cases)
+    return resolve_study(expand_study(paper), cases)
 
 
 def test_time_estimates_meet_the_paper_runs_measurements():
@@ -476,7 +476,7 @@ def test_the_declared_partial_sums_are_those_a_lucky_run_allocates(noisy):
     study["lucky"]["registration"] = ["cog"]
     if not noisy:
         study["lucky"]["detectors"]["faint"] = {"photons_per_frame": None, "read_noise_e": 0.0}
-    study = expand_sweeps(study)
+    study = expand_study(study)
     settings = resolve_study(study, validate_study(study)).cases["lgs" if noisy else "ltao"].lucky_settings
     config = settings["case_config"]
     n_frames, n_blocks = resources.frame_count(config), settings["error_blocks"]

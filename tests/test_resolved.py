@@ -17,7 +17,7 @@ from luckyao.studyspec.case import Case
 from luckyao.studyspec.overrides import parse_overrides, typed
 from luckyao.studyspec.schema import ConfigError, deep_merge
 from luckyao.studyspec.study import load_study, plausibility_warnings, validate_study
-from luckyao.studyspec.sweeps import expand_sweeps
+from luckyao.studyspec.sweeps import expand_study
 from luckyao.studyspec.view import resolve_study
 
 from studies import REPO, snakemake, snakemake_command, tiny
@@ -122,7 +122,7 @@ def test_a_summary_names_every_key_set_apart_from_the_base():
     study = tiny()
     study["cases"]["big"] = {"telescope": {"diameter_m": 8.0}, "ao": {"coupling": 0.25}, "lgs": {"enabled": True}}
     study["turbulence"].pop("duration_s")
-    view = resolve_study(expand_sweeps(study), validate_study(study))
+    view = resolve_study(expand_study(study), validate_study(study))
     big = view.cases["big"]
     differences = {k: v for k, v in big.differences.items() if k not in big.derived}
     summary = CaseSummary.of("big", Case.from_config(big.config), differences).summary()

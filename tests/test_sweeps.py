@@ -5,9 +5,9 @@ import copy
 
 import pytest
 
-from luckyao.studyspec.schema import ConfigError, name_problem
+from luckyao.studyspec.schema import ConfigError, deep_merge, name_problem
 from luckyao.studyspec.study import plausibility_warnings, unused_cases, validate_study
-from luckyao.studyspec.sweeps import expand_sweeps, sweep_points
+from luckyao.studyspec.sweeps import expand_study, sweep_points
 
 from studies import tiny, with_sweep
 
@@ -32,7 +32,7 @@ def test_a_grid_is_every_combination_named_by_its_values_with_its_values_applied
         assert case["camera"]["wavelength_m"] == point.values["camera.wavelength_m"]
         assert case["wfs"]["n_subapertures"] == 4  # the sweep's overrides
         assert name_problem(point.case) is None
-    assert expand_sweeps(study)["figures"]["grid"]["cases"] == names
+    assert expand_study(study)["figures"]["grid"]["cases"] == names
 
 
 def test_a_point_equal_to_an_existing_case_is_that_case():
@@ -52,8 +52,8 @@ def test_adding_values_keeps_the_other_points_names_and_configs():
 
 def test_expanding_twice_changes_nothing():
     study = with_sweep({"atmosphere.r0_500nm_m": [0.12, 0.25]})
-    once = expand_sweeps(study)
-    assert expand_sweeps(once) == once
+    once = expand_study(study)
+    assert expand_study(once) == once
 
 
 def test_a_key_the_overrides_add_can_be_swept():
@@ -123,4 +123,35 @@ def test_implausible_values_are_warned_about_by_key_and_stay_valid():
 def test_cases_no_figure_shows_are_named():
     study = tiny()
     study["cases"]["spare"] = copy.deepcopy(study["cases"]["good"])
-    assert unused_cases(expand_sweeps(study)) == ["spare"]
+    assert unused_cases(expand_study(study)) == ["spare"]
+
+
+def test_a_figure_draws_the_cases_its_patterns_match_in_the_configs_order():
+    """cases_matching: after the figure's cases, pattern by pattern, each case once; an overlay's
+    cases join; expanding twice changes nothing."""
+    config = {
+        "cases": {"noao_D4m": {}, "ltao_D4m": {}, "noao_D2m": {}, "ltao_sodium_D2m": {}, "other": {}},
+        "figures": {
+            "size": {
+                "kind": "quality_vs_diameter",
+                "cases": ["other"],
+                "cases_matching": ["noao_D*", "ltao_D*", "*_D2m"],
+            }
+        },
+    }
+    expanded = expand_study(config)
+    assert expanded["figures"]["size"]["cases"] == ["other", "noao_D4m", "noao_D2m", "ltao_D4m", "ltao_sodium_D2m"]
+    assert expand_study(expanded) == expanded
+    assert config["figures"]["size"]["cases"] == ["other"]  # a copy
+    overlay = deep_merge(config, {"cases": {"noao_D39m": {}}})
+    assert "noao_D39m" in expand_study(overlay)["figures"]["size"]["cases"]
+
+
+@pytest.mark.parametrize("patterns", [["noao_D*", "glao_*"], "noao_D*", [""]])
+def test_a_pattern_that_matches_no_case_is_refused_naming_the_key(patterns):
+    config = {
+        "cases": {"noao_D4m": {}},
+        "figures": {"size": {"kind": "quality_vs_diameter", "cases_matching": patterns}},
+    }
+    with pytest.raises(ConfigError, match=r"figures\.size\.cases_matching"):
+        expand_study(config)

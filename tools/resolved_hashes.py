@@ -9,7 +9,7 @@ from luckyao.figures.settings import CaseSummary, short_labels
 from luckyao.io.hashing import sha256
 from luckyao.studyspec.case import Case
 from luckyao.studyspec.study import read_study, validate_study
-from luckyao.studyspec.sweeps import expand_sweeps
+from luckyao.studyspec.sweeps import expand_study
 from luckyao.studyspec.view import resolve_study
 
 STUDIES = {
@@ -23,7 +23,7 @@ STUDIES = {
 }
 
 for label, paths in STUDIES.items():
-    study = expand_sweeps(read_study(*paths))
+    study = expand_study(read_study(*paths))
     view = resolve_study(study, validate_study(study))
     for name, case in sorted(view.cases.items()):
         keys = [case.screens.key] + [

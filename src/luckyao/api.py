@@ -36,10 +36,10 @@ __all__ = ["open_case", "open_telemetry", "open_figure", "draw", "load_study", "
 def load_study(*paths) -> dict:
     """A study config from YAML files (later ones merged over earlier ones, sweeps
     expanded), validated; raises ``ConfigError`` naming the key."""
-    from .studyspec.sweeps import expand_sweeps
+    from .studyspec.sweeps import expand_study
 
     study, _ = _load_study(*paths)
-    return expand_sweeps(study)
+    return expand_study(study)
 
 
 def _open(path: Path, what: str) -> xr.Dataset:

@@ -82,10 +82,10 @@ def cmd_show(args) -> int:
     except StudyTooLarge as err:
         print(f"luckyao show: warning: {err}", file=sys.stderr)
         from .studyspec.study import validate_study
-        from .studyspec.sweeps import expand_sweeps
+        from .studyspec.sweeps import expand_study
         from .studyspec.view import resolve_study
 
-        study = expand_sweeps(_study_with(paths, args.overrides, args.case))
+        study = expand_study(_study_with(paths, args.overrides, args.case))
         view = resolve_study(study, validate_study(study))
     except ConfigError as err:
         for problem in str(err).splitlines():

@@ -29,7 +29,7 @@ from ..io.datasets import atomic_path, code_version, open_dataset, require_finit
 from ..io.hashing import canonical_json, sha256
 from ..studyspec.lucky import lucky_settings
 from ..studyspec.study import drawn_cases, load_study
-from ..studyspec.sweeps import expand_sweeps
+from ..studyspec.sweeps import expand_study
 from ..studyspec.view import resolve_study
 from ..version import __version__
 
@@ -235,7 +235,7 @@ def archive(study_dir=".", configfiles=(), out=None, echo=print) -> Path:
                 ]
             )
         )
-    drawn = drawn_cases(expand_sweeps(study))
+    drawn = drawn_cases(expand_study(study))
     absent = [
         f"case '{case}': results/cases/{case}/{name} missing; rerun the study (snakemake) before archiving"
         for case in drawn

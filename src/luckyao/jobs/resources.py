@@ -46,7 +46,7 @@ from ..studyspec.products import commands_spec, geometric_wfs, iterative, recons
 from ..studyspec.resolved import criteria_of, imaged_targets
 from ..studyspec.schema import ConfigError, case_defaults
 from ..studyspec.study import validate_study
-from ..studyspec.sweeps import expand_sweeps
+from ..studyspec.sweeps import expand_study
 from ..studyspec.view import ResolvedStudy, resolve_study
 from ..units import ARCSEC_RAD
 from ..wfs.sampling import calibration_screen_size, samples_per_subaperture
@@ -690,7 +690,7 @@ def checked_study(
     problem naming its key), then :func:`preflight` in ``folder`` (``StudyTooLarge``, one line
     per problem); returns the study resolved (``studyspec.view``).
     ``parallel_jobs``: jobs run at once (default: this machine's cores)."""
-    study = expand_sweeps(config)
+    study = expand_study(config)
     view = resolve_study(study, validate_study(study))
     problems = preflight(view, folder, memory_bytes, parallel_jobs or os.cpu_count() or 1)
     if problems:

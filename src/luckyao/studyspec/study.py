@@ -18,7 +18,7 @@ from .lucky import (
 from .resolved import criteria_of
 from .scaling import PRIOR_KEY, derived_case, seeded_case
 from .schema import ConfigError, check_finite, deep_merge, load_schema, validate_keys
-from .sweeps import expand_sweeps
+from .sweeps import expand_study
 from .yamlfile import read_config_file
 
 
@@ -155,7 +155,7 @@ def validate_study(config: dict, schema: dict | None = None) -> dict:
     """
     schema = schema or load_schema()
     check_finite(config, "")
-    config = expand_sweeps(config)
+    config = expand_study(config)
     validate_keys(config, schema, "")
     case_schema = dict(schema["definitions"]["case"], definitions=schema["definitions"])
     cases, problems = {}, []

@@ -19,6 +19,7 @@ new ones run. A figure with ``sweep: r0`` draws every point of the grid.
 """
 
 import copy
+import fnmatch
 import itertools
 import math
 from dataclasses import dataclass
@@ -145,10 +146,41 @@ def sweep_overrides(config: dict, sweep: str) -> dict:
     return out
 
 
-def expand_sweeps(config: dict) -> dict:
-    """A copy of ``config`` with every sweep's points among its ``cases`` and each
-    figure with a ``sweep`` given that sweep's cases (in grid order). Expanding an
-    expanded config changes nothing."""
+def expand_study(config: dict) -> dict:
+    """A copy of ``config`` with every sweep's points among its ``cases``, each figure with a
+    ``sweep`` given that sweep's cases (in grid order) and each with ``cases_matching`` the
+    cases it matches (:func:`match_figure_cases`). Expanding an expanded config changes nothing."""
+    return match_figure_cases(_expand_sweeps(config))
+
+
+def match_figure_cases(config: dict) -> dict:
+    """``config`` with each figure's ``cases_matching`` (shell patterns, ``fnmatch``) added to its
+    ``cases`` (and the key dropped): pattern by pattern, the matching cases in the order the
+    config lists them, each once. A pattern that matches no case is refused, naming it; so is a figure left with no
+    case. Overlays compose through it: ``noao_D*`` draws a later overlay's ``noao_D39m`` too."""
+    figures = config.get("figures") or {}
+    if not any(isinstance(f, dict) and "cases_matching" in f for f in figures.values()):
+        return config
+    expanded = copy.deepcopy(config)
+    names = list(expanded.get("cases") or {})
+    for fig_id, figure in expanded["figures"].items():
+        if not isinstance(figure, dict) or "cases_matching" not in figure:
+            continue
+        patterns = figure["cases_matching"]
+        if not isinstance(patterns, list) or not all(isinstance(p, str) and p for p in patterns):
+            raise ConfigError(f"config key 'figures.{fig_id}.cases_matching': a list of case-name patterns")
+        drawn = list(figure.get("cases") or [])
+        for pattern in patterns:
+            matched = [name for name in names if fnmatch.fnmatchcase(name, pattern)]
+            if not matched:
+                raise ConfigError(f"config key 'figures.{fig_id}.cases_matching': {pattern!r} matches no case")
+            drawn += [name for name in matched if name not in drawn]
+        figure["cases"] = drawn
+        del figure["cases_matching"]  # the figure as if its cases were written out
+    return expanded
+
+
+def _expand_sweeps(config: dict) -> dict:
     sweeps = config.get("sweeps") or {}
     if not sweeps:
         return config

@@ -30,7 +30,7 @@ from .products import (
 from .scaling import derived_case, derived_keys, training_case
 from .schema import deep_merge
 from .study import drawn_cases, unused_cases
-from .sweeps import expand_sweeps
+from .sweeps import expand_study
 
 
 @dataclass(frozen=True, eq=False)
@@ -195,7 +195,7 @@ def flat(config: dict, prefix: str = "") -> dict:
 def resolve_study(study: dict, configs: dict) -> ResolvedStudy:
     """The view of a validated study: ``study`` (its sweeps expanded here if not yet) and
     ``configs``, its resolved cases (``validate_study(study)``)."""
-    study = expand_sweeps(study)
+    study = expand_study(study)
     base = flat(derived_case(study["base"], "base"))
     durations = screens_durations(study, configs)
     screens = {name: turbulence_spec(study, case, durations[name]) for name, case in configs.items()}
