@@ -340,10 +340,15 @@ sub-apertures with 14, 26, 34 and 52 samples (WFS fields of 3.36, 6, 8 and 12"; 
 GEOMETRIC_NODES = 4.1
 """The geometric sensor's pupil samples per valid sub-aperture: the nodes at half its pitch
 (corners, edge mid-points, centre; 16,264 for the 39 m case's 3,972 sub-apertures)."""
-GEOMETRIC_WFS_NS = 80.0
+GEOMETRIC_NODE_NS = 101.0
+"""The geometric sensor's propagation: time per beacon, node and step through the layers (9.84 ms
+per step for 6 x 16,264 nodes measured at 39 m, bench_step --system elt; scattered nodes, not the
+physical sensor's rows of :data:`LGS_PROPAGATION_NS`)."""
+GEOMETRIC_WFS_NS = 29.0
 """The geometric sensor's time per beacon, valid sub-aperture and step besides the propagation:
-the exposure's mean phase, the mean gradients, the NEA noise and the tilt removal (3.7 ms of CPU
-per two-step exposure of 6 x 3,972 sub-apertures measured at 39 m, a loaded machine)."""
+the exposure's mean phase, the mean gradients, the NEA noise and the tilt removal (0.69 ms per
+step for 6 x 3,972 sub-apertures measured at 39 m, bench_step --system elt). With the
+propagation: 10.6 ms per step estimated, the 39 m slopes job's 9.2 measured."""
 CALIBRATION_SCREEN_NS = 70.0
 """A calibration draw's time per screen sample (normal deviates, product, complex FFT): 0.29 s per
 2048^2 draw measured (4.2 m, the 12" WFS field; a loaded machine)."""
@@ -407,10 +412,10 @@ def wfs_step_ns(case: dict) -> float:
 def lgs_chain_ms(case: dict) -> float:
     """One core's ms per step of the LGS chain: every beacon's propagation to its valid
     sub-apertures' pupil samples (:data:`LGS_PROPAGATION_NS`) and its WFS (:func:`wfs_step_ns`);
-    geometric (``wfs.model``), to :data:`GEOMETRIC_NODES` nodes per sub-aperture and
-    :data:`GEOMETRIC_WFS_NS`."""
+    geometric (``wfs.model``), :data:`GEOMETRIC_NODES` nodes per sub-aperture at
+    :data:`GEOMETRIC_NODE_NS` and :data:`GEOMETRIC_WFS_NS`."""
     if geometric_wfs(case):
-        per_subaperture_ns = LGS_PROPAGATION_NS * GEOMETRIC_NODES + GEOMETRIC_WFS_NS
+        per_subaperture_ns = GEOMETRIC_NODE_NS * GEOMETRIC_NODES + GEOMETRIC_WFS_NS
         return case["lgs"]["n_beacons"] * valid_subapertures(case) * per_subaperture_ns / 1e6
     n_s = wfs_pupil_samples(case) / case["wfs"]["n_subapertures"]
     per_subaperture_ns = LGS_PROPAGATION_NS * n_s**2 + wfs_step_ns(case)
