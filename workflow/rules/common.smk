@@ -8,7 +8,6 @@ from luckyao.jobs.code_deps import step_sources
 from luckyao.io.datasets import atomic_path
 from luckyao.jobs.live_run import hold_shared
 from luckyao.jobs.resources import (
-    TURBULENCE_THREADS,
     calibration_memory_bytes,
     calibration_minutes,
     StudyTooLarge,
@@ -20,6 +19,8 @@ from luckyao.jobs.resources import (
     machine_memory_bytes,
     mem_mb,
     reconstructor_memory_bytes,
+    screens_job_threads,
+    screens_minutes,
     simulate_memory_bytes,
     simulate_minutes,
     simulate_seconds,
@@ -311,13 +312,8 @@ def screens_priority(key):
 
 
 def screens_threads(key):
-    """A screens job's threads: two layers at once (``TURBULENCE_THREADS``) when it is the study's
-    only screens job and two layers fit this machine's memory; else one, so that several run side
-    by side and none waits for both cores while one-core jobs hold one (the same screens for any
-    number)."""
-    spec = TURBULENCE_BY_KEY[key]
-    fits = mem_mb(turbulence_memory_bytes(spec, TURBULENCE_THREADS)) * 1e6 <= machine_memory_bytes()
-    return TURBULENCE_THREADS if len(TURBULENCE_BY_KEY) == 1 and fits else 1
+    """A screens job's threads (``resources.screens_job_threads``)."""
+    return screens_job_threads(TURBULENCE_BY_KEY[key], len(TURBULENCE_BY_KEY))
 
 
 def slopes_priority(key):

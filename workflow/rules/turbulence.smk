@@ -13,7 +13,7 @@ rule turbulence:
     threads: lambda w: screens_threads(w.key)  # 2 for a study's only screens job, else 1
     resources:
         mem_mb=lambda w: mem_mb(turbulence_memory_bytes(TURBULENCE_BY_KEY[w.key], screens_threads(w.key))),  # paper fidelity: 15800
-        runtime=15,  # minutes; paper fidelity: 5 measured
+        runtime=lambda w: screens_minutes(TURBULENCE_BY_KEY[w.key], screens_threads(w.key)),  # paper fidelity: 5 measured
     params:
         spec=lambda w: canonical_json(TURBULENCE_BY_KEY[w.key]),
     shell:

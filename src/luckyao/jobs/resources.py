@@ -379,9 +379,24 @@ def step_ms(case: dict) -> float:
     return STEP_MS_8M * (case["telescope"]["diameter_m"] / 8.2) ** STEP_EXPONENT
 
 
-def screens_seconds(spec: dict) -> float:
-    """Making the screens: :data:`SCREENS_NS_PER_SAMPLE` per sample, on the rule's threads."""
-    return SCREENS_NS_PER_SAMPLE * 1e-9 * sum(screens_samples(spec)) / TURBULENCE_THREADS
+def screens_seconds(spec: dict, threads: int = TURBULENCE_THREADS) -> float:
+    """Making the screens: :data:`SCREENS_NS_PER_SAMPLE` per sample, on ``threads`` (a layer each)."""
+    return SCREENS_NS_PER_SAMPLE * 1e-9 * sum(screens_samples(spec)) / threads
+
+
+def screens_job_threads(spec: dict, n_screens_jobs: int) -> int:
+    """A screens job's threads: two layers at once (:data:`TURBULENCE_THREADS`) when it is the
+    study's only screens job and two layers fit this machine's memory; else one, so that several
+    run side by side and none waits for both cores while one-core jobs hold one (the same screens
+    for any number)."""
+    fits = mem_mb(turbulence_memory_bytes(spec, TURBULENCE_THREADS)) * 1e6 <= machine_memory_bytes()
+    return TURBULENCE_THREADS if n_screens_jobs == 1 and fits else 1
+
+
+def screens_minutes(spec: dict, threads: int) -> int:
+    """A screens job's wall time to declare [min]: at least 15, else :data:`RUNTIME_MARGIN` x
+    :func:`screens_seconds` (39 m at 100 s: 40 GB of screens, ~12 minutes of one core)."""
+    return max(15, math.ceil(RUNTIME_MARGIN * screens_seconds(spec, threads) / 60))
 
 
 def reconstructor_seconds(spec: dict) -> float:
@@ -566,15 +581,17 @@ def study_jobs(view: ResolvedStudy) -> list[Job]:
     def add(name, *values):
         jobs.setdefault(name, Job(name, *values))
 
+    n_screens_jobs = len({resolved.screens.key for resolved in view.cases.values()})
     for name, resolved in view.cases.items():
         case, screens = resolved.config, resolved.screens
+        threads = screens_job_threads(screens.spec, n_screens_jobs)
         add(
             f"turbulence {screens.key}",
             name,
-            turbulence_memory_bytes(screens.spec),
+            turbulence_memory_bytes(screens.spec, threads),
             screens.samples_path,
             screens_bytes(screens.spec),
-            screens_seconds(screens.spec),
+            screens_seconds(screens.spec, threads),
         )
         if (product := resolved.calibration) is not None:
             spec = product.spec
