@@ -25,9 +25,7 @@ from luckyao.wfs.sampling import calibration_screen_size
 
 CONFIG = Path(__file__).resolve().parents[1] / "config"
 ELT = (CONFIG / "config.yaml", CONFIG / "elt.yaml")
-CASES = ("noao_D39m", "ltao_sodium_D39m", "glao_sodium_D39m")
-ON_DIAMETER_FIGURE = CASES[:2]
-"""The 39 m cases on the `diameter` figure (no GLAO series there); the `elt` figure draws all."""
+CASES = ("noao_D39m", "ltao_sodium_D39m")
 JOB_LIMIT_BYTES = 16e9
 """Every 39 m job's declared memory at most this (issue 42)."""
 
@@ -53,7 +51,7 @@ def test_the_overlay_derives_the_stated_system(elt):
         assert case["lgs"]["n_beacons"] == 6 and case["lgs"]["height_m"] == 90e3
         assert case["duration_s"] == 20.0 and case["atmosphere"]["r0_500nm_m"] == 0.135
         assert len(case["atmosphere"]["height_m"]) == 9
-    assert cases["ltao_sodium_D39m"]["ao"]["mode"] == "ltao" and cases["glao_sodium_D39m"]["ao"]["mode"] == "glao"
+    assert cases["ltao_sodium_D39m"]["ao"]["mode"] == "ltao"
     assert cases["noao_D39m"]["ao"]["mode"] == "none" and cases["noao_D39m"]["lgs"]["enabled"]
 
 
@@ -106,7 +104,7 @@ def test_the_side_launch_elongation_fits_the_wfs_field(elt):
 
 def test_every_39m_job_is_declared_within_16_gb(elt):
     """Each job's estimate x the rules' margin (the lucky job's as is) at most 16 GB; the noAO
-    case takes its LGS telemetry from an AO case's (GLAO's: the first by name), so builds no tomography."""
+    case takes its lgs_rms from the LTAO case's slopes, so builds no tomography."""
     config, _ = elt
     view = checked_study(config, memory_bytes=64e9)  # the machine aside: the estimates themselves
     jobs = [job for job in study_jobs(view) if job.case in CASES]
@@ -117,13 +115,12 @@ def test_every_39m_job_is_declared_within_16_gb(elt):
         margin = 1.0 if job.name.startswith(("lucky", "calibration")) else MARGIN
         assert margin * job.memory_bytes <= JOB_LIMIT_BYTES, job
         assert job.seconds > 0
-    assert view.cases["noao_D39m"].lgs_twin == "glao_sodium_D39m"  # the first AO case by name
+    assert view.cases["noao_D39m"].lgs_twin == "ltao_sodium_D39m"
     slopes = next(job for job in jobs if job.name.startswith("slopes "))
     assert slopes.seconds < 120 and MARGIN * slopes.memory_bytes < 5e9  # geometric: ~10 ms per step
     simulate = {job.case: job for job in jobs if job.name.startswith("simulate ")}
-    for ao in CASES[1:]:
-        assert simulate["noao_D39m"].memory_bytes < simulate[ao].memory_bytes
-        assert simulate["noao_D39m"].seconds < simulate[ao].seconds
+    assert simulate["noao_D39m"].memory_bytes < simulate["ltao_sodium_D39m"].memory_bytes
+    assert simulate["noao_D39m"].seconds < simulate["ltao_sodium_D39m"].seconds
 
 
 def test_the_calibration_draws_are_capped_at_39m(elt):
@@ -166,7 +163,7 @@ def test_composed_over_the_telescope_study_the_diameter_figure_draws_39m():
     both = resolve_study(*(lambda c: (c, validate_study(c)))(load_study(*diameter, CONFIG / "elt.yaml")[0]))
     drawn = both.config["figures"]["diameter"]["cases"]
     assert [c for c in drawn if c not in CASES] == alone["figures"]["diameter"]["cases"]
-    assert set(drawn) - set(alone["figures"]["diameter"]["cases"]) == set(ON_DIAMETER_FIGURE)
+    assert set(drawn) - set(alone["figures"]["diameter"]["cases"]) == set(CASES)
     spec = both.config["figures"]["diameter"]
     settings = FigureSettings.from_dict({**spec, "case_configs": {c: both.configs[c] for c in drawn}})
     frames = np.random.default_rng(2).uniform(0, 0.3, 100)
@@ -198,7 +195,7 @@ def test_bad_39m_values_are_refused_by_key(elt):
 
 def test_the_elt_figure_draws_the_39m_points(elt):
     """The `elt` figure (kind quality_vs_diameter): one diameter, the no-AO and the six-beacon
-    LTAO and GLAO series, each point its own case's values."""
+    LTAO series, each point its own case's values."""
     from luckyao.figures import FIGURE_KINDS, FigureSettings
 
     from synthetic import lucky_dataset
@@ -210,7 +207,6 @@ def test_the_elt_figure_draws_the_39m_points(elt):
     datasets = [lucky_dataset(0.1 * (k + 1), 5, frame_strehl=frames) for k in range(len(spec["cases"]))]
     ds = FIGURE_KINDS["quality_vs_diameter"][0](settings, datasets)
     assert list(ds.diameter.values) == [39.0]
-    assert list(ds.series.values) == ["no AO", "LTAO, 6 LGS 90 km", "GLAO, 6 LGS 90 km"]
+    assert list(ds.series.values) == ["no AO", "LTAO, 6 LGS 90 km"]
     assert ds.case.sel(series="LTAO, 6 LGS 90 km", diameter=39.0).item() == "ltao_sodium_D39m"
-    assert ds.strehl.sel(series="GLAO, 6 LGS 90 km", diameter=39.0).values.ravel()[0] == pytest.approx(0.3)
     assert ds.strehl.sel(series="no AO", diameter=39.0).values.ravel()[0] == pytest.approx(0.1)
