@@ -141,14 +141,19 @@ def test_the_calibration_draws_are_capped_at_39m(elt):
 
 
 def test_the_overlay_moves_no_key_of_the_telescope_study():
-    """Over config/diameter.yaml, config/elt.yaml leaves every case of it as it was."""
+    """Over config/diameter.yaml, config/elt.yaml leaves every case of it as it was, and its own
+    cases are those it runs alone: the same screens, slopes and lucky settings (the published
+    39 m points are what config/elt.yaml alone gives)."""
     diameter = (CONFIG / "config.yaml", CONFIG / "diameter.yaml")
     before = resolve_study(*(lambda c: (c, validate_study(c)))(load_study(*diameter)[0]))
     after = resolve_study(*(lambda c: (c, validate_study(c)))(load_study(*diameter, CONFIG / "elt.yaml")[0]))
+    alone = resolve_study(*(lambda c: (c, validate_study(c)))(load_study(*ELT)[0]))
     assert set(after.cases) - set(before.cases) == set(CASES)
-    for name, case in before.cases.items():
+    for name, case in [*before.cases.items(), *((n, alone.cases[n]) for n in CASES)]:
         assert after.cases[name].config_sha256 == case.config_sha256, name
+        assert after.cases[name].screens.key == case.screens.key, name
         assert sha256(after.cases[name].lucky_settings) == sha256(case.lucky_settings), name
+    assert after.cases["ltao_sodium_D39m"].slopes.key == alone.cases["ltao_sodium_D39m"].slopes.key
 
 
 def test_composed_over_the_telescope_study_the_diameter_figure_draws_39m():
