@@ -156,8 +156,8 @@ def expand_study(config: dict) -> dict:
 def match_figure_cases(config: dict) -> dict:
     """``config`` with each figure's ``cases_matching`` (shell patterns, ``fnmatch``) added to its
     ``cases`` (and the key dropped): pattern by pattern, the matching cases in the order the
-    config lists them, each once. A pattern that matches no case is refused, naming it; so is a figure left with no
-    case. Overlays compose through it: ``noao_D*`` draws a later overlay's ``noao_D39m`` too."""
+    config lists them, each once. A pattern that matches no case is refused, naming it.
+    Overlays compose through it: ``noao_D*`` draws a later overlay's ``noao_D39m`` too."""
     figures = config.get("figures") or {}
     if not any(isinstance(f, dict) and "cases_matching" in f for f in figures.values()):
         return config
